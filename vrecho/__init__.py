@@ -1,0 +1,1 @@
+"""vrecho: audio-augmented 3D scene reconstruction."""

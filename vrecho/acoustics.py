@@ -1,0 +1,236 @@
+"""Room acoustics: pyroomacoustics rooms from scenes, cached impulse responses, recordings.
+
+An impulse response does not depend on the emitted sound, so it is simulated once per scene and
+source/microphone positions (image sources plus ray tracing, so a 1 s frame carries the whole
+reverberant tail), cached on disk under a hash of everything that shapes it, and convolved with
+each sound. Sample 0 of every impulse response returned here is the emission instant
+(pyroomacoustics' fractional-delay lag is removed).
+
+Recordings follow PROTOCOL.md: a frame is 1 s of microphone signal from the pulse onset, in the
+steady state of the pulse train (the previous pulses' tails fold into the frame), plus pink
+background noise 20 to 40 dB below the direct sound and white microphone self-noise.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import VrechoError
+from .io import atomic_save_npy
+from .scene import BANDS_HZ, DevicePose, MicArray, Scene
+from .signals import FS, check_fs, colored_noise
+
+SPEED_OF_SOUND = 343.0
+"""m/s; pyroomacoustics' default, used by the simulator and by every echo-delay computation."""
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """Settings of the hybrid simulator (image sources up to ``max_order``, then ray tracing)."""
+
+    max_order: int = 6
+    n_rays: int = 3000
+    receiver_radius_m: float = 0.5
+    energy_thres: float = 1e-7
+    length_s: float = 1.0
+    air_absorption: bool = True
+
+
+DEFAULT_SIMULATION = Simulation()
+
+
+def default_cache_dir() -> Path:
+    return Path(os.environ.get("VRECHO_CACHE", Path.home() / ".cache" / "vrecho")) / "ir"
+
+
+def _octave_bands(fs: int):
+    import pyroomacoustics as pra
+
+    return pra.acoustics.OctaveBandsFactory(fs=fs, n_fft=512, keep_dc=True, base_frequency=BANDS_HZ[0])
+
+
+def build_room(scene: Scene, fs: int = FS, sim: Simulation = DEFAULT_SIMULATION):
+    """A ``pyroomacoustics.Room`` of the scene's patches, each with its own frequency-dependent
+    material (resampled to the simulator's bands so every wall has the same ones)."""
+    import pyroomacoustics as pra
+
+    fs = check_fs(fs)
+    bands = _octave_bands(fs)
+    walls = []
+    for i, patch in enumerate(scene.patches()):
+        m = pra.Material({"coeffs": list(patch.material.absorption), "center_freqs": list(BANDS_HZ)},
+                         patch.material.scattering)
+        m.resample(bands)
+        walls.append(pra.wall_factory(patch.corners.T, m.absorption_coeffs, m.scattering_coeffs,
+                                      name=f"{patch.kind}{i}"))
+    room = pra.Room(walls, fs=fs, max_order=sim.max_order, ray_tracing=sim.n_rays > 0,
+                    air_absorption=sim.air_absorption)
+    if sim.n_rays > 0:
+        room.set_ray_tracing(n_rays=sim.n_rays, receiver_radius=sim.receiver_radius_m,
+                             energy_thres=sim.energy_thres, time_thres=sim.length_s)
+    return room
+
+
+def _cache_key(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: int, sim: Simulation) -> str:
+    import pyroomacoustics as pra
+
+    d = scene.to_dict()
+    payload = {"room": d["room"], "discontinuities": d["discontinuities"], "source": np.round(source, 6).tolist(),
+               "mics": np.round(mics, 6).tolist(), "fs": fs, "sim": asdict(sim), "pra": pra.__version__, "v": 1}
+    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:32]
+
+
+def impulse_responses(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: int = FS,
+                      sim: Simulation = DEFAULT_SIMULATION, cache: str | Path | bool | None = None) -> np.ndarray:
+    """Simulated impulse responses from one source to each microphone.
+
+    Parameters
+    ----------
+    scene : Scene
+    source : array, shape (3,)
+        Source position in metres.
+    mics : array, shape (M, 3)
+        Microphone positions in metres.
+    fs : int
+        Sample rate in Hz.
+    sim : Simulation
+        Simulator settings.
+    cache : path, bool or None
+        Folder of cached responses; None for :func:`default_cache_dir`, False for none.
+
+    Returns
+    -------
+    numpy.ndarray, shape (M, round(sim.length_s * fs)), float32
+        Sample 0 is the emission instant; the tail beyond ``length_s`` is folded in modulo the
+        length, as in the steady state of a pulse train with that period.
+    """
+    import pyroomacoustics as pra
+
+    fs = check_fs(fs)
+    source = np.asarray(source, dtype=float)
+    mics = np.atleast_2d(np.asarray(mics, dtype=float))
+    if source.shape != (3,) or mics.ndim != 2 or mics.shape[1] != 3:
+        raise VrechoError(f"source/mics: expected shapes (3,) and (M, 3), got {source.shape} and {mics.shape}")
+    points = np.vstack([source, mics])
+    outside = ~scene.room.contains(points)
+    if outside.any():
+        k = int(np.argmax(outside))
+        what = "source" if k == 0 else f"microphone {k - 1}"
+        raise VrechoError(f"{what} at {np.round(points[k], 3).tolist()} is outside the room")
+    key = _cache_key(scene, source, mics, fs, sim)
+    folder = None if cache is False else Path(default_cache_dir() if cache in (None, True) else cache)
+    if folder is not None:
+        path = folder / key[:2] / f"{key}.npy"
+        if path.exists():
+            try:
+                return np.load(path)
+            except (OSError, ValueError):
+                pass  # a damaged cache entry is simulated again and replaced
+    pra.random.seed(int(key[:8], 16))  # ray tracing repeatable for the same key
+    room = build_room(scene, fs, sim)
+    room.add_source(source)
+    room.add_microphone_array(pra.MicrophoneArray(mics.T, fs))
+    room.compute_rir()
+    lag = pra.constants.get("frac_delay_length") // 2
+    n = int(round(sim.length_s * fs))
+    out = np.zeros((len(mics), n), dtype=np.float64)
+    for m, rir in enumerate(room.rir):
+        h = np.asarray(rir[0], dtype=np.float64)[lag:]
+        h = np.pad(h, (0, -len(h) % n))
+        out[m] = h.reshape(-1, n).sum(axis=0)
+    out = out.astype(np.float32)
+    if folder is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_save_npy(path, out)
+    return out
+
+
+def device_impulse_response(scene: Scene, pose: DevicePose, array: MicArray | None = None, fs: int = FS,
+                            sim: Simulation = DEFAULT_SIMULATION, cache=None) -> np.ndarray:
+    """Impulse responses (M, n) from the device's emitter to its microphones (the scene's array
+    by default; channel 0 is the protocol's microphone 7 cm above the emitter)."""
+    array = scene.mic_array if array is None else array
+    return impulse_responses(scene, pose.emitter, pose.microphones(array), fs, sim, cache)
+
+
+def direct_amplitude(distance_m: float) -> float:
+    """Free-field amplitude of the direct path at ``distance_m`` for a unit source: 1 / r, the
+    convention of pyroomacoustics 0.10 (checked: 14.2 at 7 cm, not 1 / 4 pi r)."""
+    return 1.0 / max(distance_m, 1e-3)
+
+
+def _noise(shape, level_rms: float, snr_db: float, self_noise_db: float, rng: np.random.Generator) -> np.ndarray:
+    n = shape[-1]
+    pink = np.stack([colored_noise(n, 1.0, rng) for _ in range(int(np.prod(shape[:-1])))]).reshape(shape)
+    white = rng.standard_normal(shape)
+    return level_rms * (10 ** (-snr_db / 20) * pink + 10 ** (-self_noise_db / 20) * white)
+
+
+def record_pulse(ir: np.ndarray, sound: np.ndarray, direct_distance_m: float, rng: np.random.Generator,
+                 snr_db: float = 30.0, self_noise_db: float = 60.0, gain_db: float = 0.0) -> np.ndarray:
+    """One 1 s frame of the device hearing its own pulse train.
+
+    Parameters
+    ----------
+    ir : array, shape (n,) or (M, n)
+        Impulse responses from :func:`impulse_responses` (n samples = one period).
+    sound : array, shape (k,)
+        The emitted sound (k <= n).
+    direct_distance_m : float
+        Emitter-to-microphone distance, which sets the direct sound's level for the noise.
+    snr_db, self_noise_db : float
+        Pink background noise and white self-noise, in dB below the direct sound.
+    gain_db : float
+        Recording gain.
+
+    Returns
+    -------
+    numpy.ndarray, same shape as ``ir``, float32
+        Steady state of the pulse train: circular convolution of the folded response with the sound.
+    """
+    ir = np.asarray(ir, dtype=np.float64)
+    n = ir.shape[-1]
+    sound = np.asarray(sound, dtype=np.float64)
+    if sound.ndim != 1 or sound.size > n:
+        raise VrechoError(f"sound: must be 1-D and at most {n} samples, got shape {sound.shape}")
+    x = np.fft.irfft(np.fft.rfft(ir, n) * np.fft.rfft(sound, n), n)
+    level = direct_amplitude(direct_distance_m) * np.sqrt(np.mean(sound ** 2))
+    x += _noise(x.shape, level, snr_db, self_noise_db, rng)
+    return (x * 10 ** (gain_db / 20)).astype(np.float32)
+
+
+def record_source(ir: np.ndarray, sound: np.ndarray, onset_s: float, direct_distance_m: float,
+                  rng: np.random.Generator, fs: int = FS, snr_db: float = 30.0, self_noise_db: float = 60.0,
+                  gain_db: float = 0.0) -> np.ndarray:
+    """1 s of microphone signal while an ambient source plays ``sound`` once, starting ``onset_s``
+    into the frame (linear convolution: the source is not periodic)."""
+    ir = np.asarray(ir, dtype=np.float64)
+    n = ir.shape[-1]
+    start = int(round(onset_s * check_fs(fs)))
+    if not 0 <= start < n:
+        raise VrechoError(f"onset_s: must lie within the frame (0 to {n / fs} s), got {onset_s}")
+    excitation = np.zeros(n)
+    k = min(len(sound), n - start)
+    excitation[start:start + k] = sound[:k]
+    m = 2 * n
+    x = np.fft.irfft(np.fft.rfft(ir, m) * np.fft.rfft(excitation, m), m)[..., :n]
+    level = direct_amplitude(direct_distance_m) * np.sqrt(np.mean(np.asarray(sound, dtype=float) ** 2))
+    x += _noise(x.shape, level, snr_db, self_noise_db, rng)
+    return (x * 10 ** (gain_db / 20)).astype(np.float32)
+
+
+def echo_delay_s(scene: Scene, pose: DevicePose, index: int | None = None) -> float:
+    """Time from the direct sound to the specular echo off a discontinuity's plane, in seconds
+    (the image-source path through the plane minus the direct path)."""
+    index = pose.target if index is None else index
+    _, _, normal = scene.room.wall_frame(scene.discontinuities[index].wall)
+    depth = scene.depth_m(pose, index)
+    image = pose.emitter + 2 * depth * normal
+    return float((np.linalg.norm(pose.microphone - image) - np.linalg.norm(pose.microphone - pose.emitter))
+                 / SPEED_OF_SOUND)

@@ -1,0 +1,162 @@
+"""Features of 1 s frames: the paper's log-mel spectrogram, and echo features that use the
+emitted sound where it is known.
+
+The log-mel spectrogram follows the paper: 2048-sample Hann window, hop 512, mel power in dB,
+62 mel bands, 25 time bins (means over groups of STFT frames), each spectrogram normalised to zero
+mean and unit variance. At 25 time bins per second one bin spans 40 ms, far coarser than the
+1.5 to 17.5 ms echo delays of surfaces 0.25 to 3 m away; hence the echo features: with the emitted
+sound known, circular Wiener deconvolution of the frame recovers the room's impulse response
+(the frame is the steady state of a pulse train, a circular convolution), from which echo delays
+can be read to a fraction of a sample and band energies to a few milliseconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+
+from .errors import VrechoError
+from .signals import FS, check_fs
+
+N_FFT = 2048
+HOP = 512
+N_MELS = 62
+N_TIME = 25
+FRAME_S = 1.0
+ECHO_WINDOW_S = 0.03
+"""Length of the early impulse response kept as an echo feature: round trips up to 5 m."""
+DECAY_BANDS_HZ = (125, 250, 500, 1000, 2000, 4000, 8000)
+
+
+def check_frames(audio, fs) -> np.ndarray:
+    """Validate 1 s frames, shape (n,) or (B, n) at ``fs`` Hz, and return them at 44.1 kHz (float32).
+
+    Another sample rate is resampled (never silently assumed); a frame of the wrong length,
+    or with NaN or infinite samples, is a :class:`VrechoError`.
+    """
+    fs = check_fs(fs)
+    x = np.asarray(audio)
+    if x.dtype.kind not in "fiu" or x.ndim not in (1, 2):
+        raise VrechoError(f"audio: expected a 1-D frame or a 2-D batch of frames of numbers, got shape {x.shape} ({x.dtype})")
+    n = int(round(FRAME_S * fs))
+    if x.shape[-1] != n:
+        raise VrechoError(f"audio: a frame is {FRAME_S:g} s, {n} samples at {fs} Hz; got {x.shape[-1]}")
+    x = x.astype(np.float32)
+    if not np.all(np.isfinite(x)):
+        raise VrechoError("audio: contains NaN or infinite samples")
+    if fs != FS:
+        import librosa
+
+        x = librosa.resample(x, orig_sr=fs, target_sr=FS, res_type="soxr_hq", axis=-1).astype(np.float32)
+        x = x[..., :FS] if x.shape[-1] >= FS else np.pad(x, [(0, 0)] * (x.ndim - 1) + [(0, FS - x.shape[-1])])
+    return x
+
+
+def logmel(audio, fs: int = FS) -> np.ndarray:
+    """The paper's normalised log-mel spectrogram.
+
+    Parameters
+    ----------
+    audio : array, shape (n,) or (B, n)
+        One or more 1 s frames.
+    fs : int
+        Sample rate in Hz (resampled to 44.1 kHz).
+
+    Returns
+    -------
+    numpy.ndarray, shape (62, 25) or (B, 62, 25), float32
+        Mel bands (low to high) by time bins; each spectrogram has zero mean and unit variance.
+    """
+    import librosa
+
+    x = check_frames(audio, fs)
+    mel = librosa.feature.melspectrogram(y=x, sr=FS, n_fft=N_FFT, hop_length=HOP, window="hann",
+                                         n_mels=N_MELS, fmax=FS / 2, power=2.0)
+    db = librosa.power_to_db(mel, ref=1.0, amin=1e-10, top_db=None)
+    groups = np.array_split(np.arange(db.shape[-1]), N_TIME)
+    pooled = np.stack([db[..., g].mean(axis=-1) for g in groups], axis=-1)
+    mean = pooled.mean(axis=(-2, -1), keepdims=True)
+    std = pooled.std(axis=(-2, -1), keepdims=True)
+    return ((pooled - mean) / np.maximum(std, 1e-6)).astype(np.float32)
+
+
+def echo_response(audio, emitted, fs: int = FS, length_s: float | None = ECHO_WINDOW_S,
+                  regularization: float = 1e-3) -> np.ndarray:
+    """The room's impulse response estimated from a frame and the known emitted sound.
+
+    Circular Wiener deconvolution over the whole frame: ``H = X S* / (|S|^2 + r max|S|^2)``. Sample
+    0 is the emission instant; where the sound has no energy (a pure tone's other frequencies)
+    the estimate has none either.
+
+    Parameters
+    ----------
+    audio : array, shape (n,) or (B, n)
+        1 s frames starting at the pulse onset.
+    emitted : array, shape (k,) or (B, k)
+        The emitted sound at the same rate.
+    fs : int
+        Sample rate of both, in Hz (resampled to 44.1 kHz).
+    length_s : float or None
+        Keep the first ``length_s`` seconds (all of it with None).
+    regularization : float
+        Noise floor relative to the sound's strongest bin.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., round(length_s * 44100)), float32
+    """
+    x = check_frames(audio, fs)
+    s = np.asarray(emitted, dtype=np.float32)
+    if s.ndim not in (1, 2) or s.shape[-1] > round(FRAME_S * fs) or not np.all(np.isfinite(s)):
+        raise VrechoError(f"emitted: expected a finite sound of at most one frame, got shape {s.shape}")
+    if np.max(np.abs(s)) == 0:
+        raise VrechoError("emitted: the emitted sound is silent")
+    if check_fs(fs) != FS:
+        import librosa
+
+        s = librosa.resample(s, orig_sr=fs, target_sr=FS, res_type="soxr_hq", axis=-1)
+    n = x.shape[-1]
+    X = np.fft.rfft(x, n)
+    S = np.fft.rfft(s, n)
+    power = np.abs(S) ** 2
+    H = X * np.conj(S) / (power + regularization * power.max(axis=-1, keepdims=True))
+    h = np.fft.irfft(H, n)
+    if length_s is not None:
+        h = h[..., :int(round(length_s * FS))]
+    return h.astype(np.float32)
+
+
+@dataclass
+class EchoFeatures:
+    """Echo features of one or more frames.
+
+    ``envelope``: (..., 1323) Hilbert envelope of the first 30 ms of the estimated impulse
+    response, divided by its direct-sound peak. ``bands``: (..., 7, 20) log energy of the
+    estimated response in the octave bands of :data:`DECAY_BANDS_HZ` over 20 bins of 25 ms
+    (0 to 0.5 s), in dB relative to the strongest cell.
+    """
+
+    envelope: np.ndarray
+    bands: np.ndarray
+
+
+def echo_features(audio, emitted, fs: int = FS) -> EchoFeatures:
+    """:class:`EchoFeatures` of frames whose emitted sound is known."""
+    h = echo_response(audio, emitted, fs, length_s=None)
+    early = h[..., :int(round(ECHO_WINDOW_S * FS))]
+    env = np.abs(scipy.signal.hilbert(early, axis=-1))
+    peak = env[..., :int(0.002 * FS)].max(axis=-1, keepdims=True)  # direct sound: first 2 ms
+    envelope = env / np.maximum(peak, 1e-12)
+    bin_len = int(0.025 * FS)
+    tail = h[..., :20 * bin_len]
+    energies = []
+    for fc in DECAY_BANDS_HZ:
+        sos = scipy.signal.butter(4, [fc / np.sqrt(2), min(fc * np.sqrt(2), 0.49 * FS)], btype="band", fs=FS, output="sos")
+        y = scipy.signal.sosfiltfilt(sos, tail, axis=-1) ** 2
+        energies.append(y.reshape(*y.shape[:-1], 20, bin_len).sum(axis=-1))
+    e = np.stack(energies, axis=-2)
+    db = 10 * np.log10(np.maximum(e, 1e-20))
+    db -= db.max(axis=(-2, -1), keepdims=True)
+    return EchoFeatures(envelope.astype(np.float32), np.maximum(db, -120).astype(np.float32))

@@ -1,0 +1,181 @@
+"""The 16 emitted sounds of PROTOCOL.md, vrecho's ranging probe and the pulse train.
+
+Every sound is 100 ms long, peaks at 0.8 and has short raised-cosine fades. Sounds with a random
+part (noises, clap, voice, whistle) take a ``numpy.random.Generator`` so that each recording can
+hear a different instance of the same kind of sound; the same generator state gives the same
+samples.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.signal
+
+from .errors import VrechoError
+
+FS = 44_100
+"""The protocol's sample rate in Hz."""
+PULSE_S = 0.1
+"""Length of every emitted sound in seconds."""
+PERIOD_S = 1.0
+"""Pulse-train period in seconds (100 ms of sound, 900 ms of silence)."""
+PEAK = 0.8
+FADE_S = 0.005
+
+TONES_HZ = (63, 125, 250, 500, 1000, 2000, 4000, 8000, 16000)
+SOUNDS: tuple[str, ...] = tuple(f"tone_{f}" for f in TONES_HZ) + (
+    "clap", "chirp", "white_noise", "pink_noise", "brown_noise", "voice", "whistle")
+"""Names of the 16 emitted sounds."""
+TRAIN_SOUNDS: tuple[str, ...] = tuple(f"tone_{f}" for f in TONES_HZ) + (
+    "clap", "pink_noise", "brown_noise")
+"""The paper's training sounds: nine tones, clap, pink and brown noise."""
+HELD_OUT_SOUNDS: tuple[str, ...] = ("voice", "whistle", "chirp", "white_noise")
+"""The paper's "unheard" test sounds."""
+
+
+def check_fs(fs) -> int:
+    """Validate a sample rate in Hz and return it as an int."""
+    if isinstance(fs, bool) or not isinstance(fs, (int, np.integer, float)) or not np.isfinite(fs) \
+            or fs <= 0 or float(fs) != int(fs):
+        raise VrechoError(f"fs: sample rate must be a positive whole number of hertz, got {fs!r}")
+    fs = int(fs)
+    if fs < 8000:
+        raise VrechoError(f"fs: sample rate {fs} Hz is too low for audio (at least 8000 Hz)")
+    return fs
+
+
+def _shape(x: np.ndarray, fs: int) -> np.ndarray:
+    """Apply the fades and scale to the protocol's peak amplitude."""
+    n_fade = int(round(FADE_S * fs))
+    ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(n_fade) / n_fade)
+    x = np.asarray(x, dtype=np.float64).copy()
+    x[:n_fade] *= ramp
+    x[-n_fade:] *= ramp[::-1]
+    return (PEAK * x / np.max(np.abs(x))).astype(np.float32)
+
+
+def _colored_noise(n: int, exponent: float, rng: np.random.Generator) -> np.ndarray:
+    """Noise whose power spectral density falls as 1/f**exponent (0 white, 1 pink, 2 brown)."""
+    spec = np.fft.rfft(rng.standard_normal(n))
+    f = np.fft.rfftfreq(n)
+    f[0] = f[1]
+    spec *= f ** (-exponent / 2.0)
+    spec[0] = 0.0
+    return np.fft.irfft(spec, n)
+
+
+def colored_noise(n: int, exponent: float, rng: np.random.Generator) -> np.ndarray:
+    """Unit-RMS noise of ``n`` samples with a 1/f**exponent power spectrum (float64)."""
+    x = _colored_noise(n, exponent, rng)
+    return x / np.sqrt(np.mean(x ** 2))
+
+
+def _clap(t: np.ndarray, fs: int, rng: np.random.Generator) -> np.ndarray:
+    # A few overlapping micro-bursts (palms meeting in more than one place), band-limited to the
+    # 0.5-6 kHz region where hand claps carry their energy, each decaying in a few milliseconds.
+    x = np.zeros_like(t)
+    for _ in range(rng.integers(1, 4)):
+        t0 = rng.uniform(0.004, 0.012)
+        tau = rng.uniform(0.004, 0.012)
+        burst = rng.standard_normal(t.size) * np.exp(-np.clip(t - t0, 0, None) / tau) * (t >= t0)
+        x += rng.uniform(0.5, 1.0) * burst
+    sos = scipy.signal.butter(2, [500, min(6000, 0.45 * fs)], btype="band", fs=fs, output="sos")
+    return scipy.signal.sosfilt(sos, x)
+
+
+def _voice(t: np.ndarray, fs: int, rng: np.random.Generator) -> np.ndarray:
+    # Source-filter model: a glottal pulse train (85-255 Hz fundamental with slight drift)
+    # through the formant resonances of a random vowel.
+    f0 = rng.uniform(85, 255) * (1 + 0.05 * np.sin(2 * np.pi * rng.uniform(3, 6) * t))
+    phase = np.cumsum(f0) / fs
+    glottal = np.diff(np.floor(phase), prepend=0.0)  # one impulse per period
+    glottal = scipy.signal.lfilter([1.0], [1.0, -0.95], glottal)  # spectral tilt
+    vowels = ((730, 1090, 2440), (270, 2290, 3010), (300, 870, 2240), (530, 1840, 2480),
+              (570, 840, 2410), (640, 1190, 2390))
+    formants = np.array(vowels[rng.integers(len(vowels))]) * rng.uniform(0.9, 1.15)
+    x = np.zeros_like(t)
+    for i, fc in enumerate(formants):
+        bw = 60 + 40 * i
+        r = np.exp(-np.pi * bw / fs)
+        a = [1.0, -2 * r * np.cos(2 * np.pi * fc / fs), r * r]
+        x += scipy.signal.lfilter([1 - r], a, glottal) / (i + 1)
+    return x + 0.01 * rng.standard_normal(t.size) * np.std(x)
+
+
+def _whistle(t: np.ndarray, fs: int, rng: np.random.Generator) -> np.ndarray:
+    f_c = np.exp(rng.uniform(np.log(700), np.log(3500)))
+    depth = rng.uniform(0.01, 0.04) * f_c
+    f = f_c + depth * np.sin(2 * np.pi * rng.uniform(4, 8) * t) + rng.uniform(-0.1, 0.1) * f_c * t / t[-1]
+    f = np.clip(f, 500, 5000)
+    x = np.sin(2 * np.pi * np.cumsum(f) / fs)
+    return x + 0.05 * rng.standard_normal(t.size)  # breath noise
+
+
+def emitted_sound(name: str, fs: int = FS, rng: np.random.Generator | None = None) -> np.ndarray:
+    """One 100 ms emitted sound of PROTOCOL.md.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`SOUNDS`.
+    fs : int
+        Sample rate in Hz.
+    rng : numpy.random.Generator, optional
+        Source of the random parts (noises, clap, voice, whistle); a fixed default when omitted.
+
+    Returns
+    -------
+    numpy.ndarray, shape (round(0.1 * fs),), float32
+        Peak amplitude 0.8, with 5 ms fades.
+    """
+    fs = check_fs(fs)
+    if name not in SOUNDS:
+        raise VrechoError(f"sound: unknown emitted sound {name!r}; expected one of {', '.join(SOUNDS)}")
+    rng = np.random.default_rng(0) if rng is None else rng
+    n = int(round(PULSE_S * fs))
+    t = np.arange(n) / fs
+    if name.startswith("tone_"):
+        f = float(name[5:])
+        if f >= fs / 2:
+            raise VrechoError(f"sound: {name} needs fs above {2 * f:.0f} Hz, got {fs}")
+        x = np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi))
+    elif name == "chirp":
+        x = scipy.signal.chirp(t, f0=440.0, t1=PULSE_S, f1=1320.0, method="linear")
+    elif name.endswith("_noise"):
+        exponent = {"white_noise": 0.0, "pink_noise": 1.0, "brown_noise": 2.0}[name]
+        x = _colored_noise(n, exponent, rng)
+    elif name == "clap":
+        x = _clap(t, fs, rng)
+    elif name == "voice":
+        x = _voice(t, fs, rng)
+    else:
+        x = _whistle(t, fs, rng)
+    return _shape(x, fs)
+
+
+def probe(fs: int = FS, f_lo: float = 200.0, f_hi: float = 18_000.0) -> np.ndarray:
+    """vrecho's documented ranging probe: a 100 ms logarithmic sweep from 200 Hz to 18 kHz.
+
+    Broadband, so echo delays can be read to a fraction of a sample by deconvolution, and
+    logarithmic, so the low bands where glass and mirror differ get as much energy as the highs.
+    Peak 0.8, 5 ms fades.
+    """
+    fs = check_fs(fs)
+    f_hi = min(f_hi, 0.45 * fs)
+    t = np.arange(int(round(PULSE_S * fs))) / fs
+    return _shape(scipy.signal.chirp(t, f0=f_lo, t1=PULSE_S, f1=f_hi, method="logarithmic"), fs)
+
+
+def pulse_train(sound: np.ndarray, n_periods: int, fs: int = FS) -> np.ndarray:
+    """The emitter's signal: ``sound`` at the start of each 1 s period, silence in between."""
+    fs = check_fs(fs)
+    sound = np.asarray(sound, dtype=np.float32)
+    period = int(round(PERIOD_S * fs))
+    if sound.ndim != 1 or sound.size > period:
+        raise VrechoError(f"sound: must be 1-D and at most one period ({period} samples), got shape {sound.shape}")
+    if n_periods < 1:
+        raise VrechoError(f"n_periods: must be at least 1, got {n_periods}")
+    out = np.zeros(n_periods * period, dtype=np.float32)
+    for k in range(n_periods):
+        out[k * period:k * period + sound.size] = sound
+    return out
