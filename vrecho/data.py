@@ -1,0 +1,323 @@
+"""Datasets: generation in parallel, storage, splits.
+
+A dataset folder holds::
+
+    manifest.json     preset, seed, counts, splits; "complete": true once every scene is in
+    scenes/           one scene JSON per room (scene_0000.json, ...)
+    frames.zarr/      Zarr v3 arrays, openable with zarr alone:
+                        audio  (N, 44100) float16   1 s microphone frames from the pulse onset
+                        logmel (N, 62, 25) float32  the paper's normalised log-mel spectrograms
+                        image  (N, 64, 25) uint8    camera crop around the faced discontinuity
+                        ir     (R, 44100) float32   the simulated impulse responses (for any probe)
+    labels.csv        one row per frame (columns in LABEL_COLUMNS)
+    progress/         one CSV per finished scene: the resume markers
+
+Each room is one unit of work: its impulse responses are simulated once (image sources plus ray
+tracing, cached) and convolved with all 16 sounds. Rows of a scene are written to ``progress/``
+only after its arrays are, and ``labels.csv`` and ``complete`` only once every scene is done, so
+an interrupted run loses nothing finished and a rerun does only what is missing.
+
+Splits are by room (PROTOCOL.md's benchmark protocol): rooms are ``train``, ``val`` or ``test``;
+every frame of every sound is stored, and the paper's protocol takes train sounds in train rooms
+and held-out sounds in test rooms (:meth:`Dataset.paper_split`).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import VrechoError
+from .io import atomic_write_text, ensure_writable_dir
+from .signals import FS, SOUNDS, TRAIN_SOUNDS, emitted_sound
+
+FORMAT_VERSION = 1
+LABEL_COLUMNS = ("frame", "scene", "split", "kind", "pose", "ir", "sound", "heard", "sound_seed", "surface",
+                 "is_open", "material", "depth_m", "incidence_deg", "src_x", "src_y", "src_z", "onset_s",
+                 "snr_db", "self_noise_db", "gain_db")
+"""``kind`` is ``echo`` (the device hears its own pulse off the surface it faces: ``surface``,
+``is_open``, ``material``, ``depth_m``) or ``source`` (an ambient source plays the sound once,
+``onset_s`` into the frame, at ``src_x, src_y, src_z`` metres in the device frame: forward, left,
+up from the emitter). Missing values are -1, empty or nan."""
+
+
+@dataclass(frozen=True)
+class Preset:
+    n_scenes: int
+    n_poses: int
+    n_sources: int
+    split: tuple[float, float, float]  # share of rooms for train, val, test
+
+
+PRESETS = {
+    "tiny": Preset(n_scenes=6, n_poses=3, n_sources=1, split=(4 / 6, 1 / 6, 1 / 6)),
+    "default": Preset(n_scenes=160, n_poses=8, n_sources=2, split=(0.7, 0.1, 0.2)),
+}
+
+
+def _splits(preset: Preset, seed: int) -> list[str]:
+    n = preset.n_scenes
+    n_val = max(1, int(round(preset.split[1] * n)))
+    n_test = max(1, int(round(preset.split[2] * n)))
+    names = ["train"] * (n - n_val - n_test) + ["val"] * n_val + ["test"] * n_test
+    order = np.random.default_rng([seed, 7919]).permutation(n)
+    return [names[k] for k in np.argsort(order)]
+
+
+def _block(preset: Preset) -> int:
+    return (preset.n_poses + preset.n_sources) * len(SOUNDS)
+
+
+def _scene_rows(out: Path, index: int, preset_name: str, seed: int, split: str, cache) -> list[dict]:
+    """Simulate one room, write its arrays and return its label rows."""
+    import zarr
+
+    from .acoustics import device_impulse_response, impulse_responses, record_pulse, record_source
+    from .features import logmel
+    from .render import World, crop
+    from .scene import random_scene
+
+    preset = PRESETS[preset_name]
+    rng = np.random.default_rng([seed, index])
+    scene = random_scene(rng, f"scene_{index:04d}", preset.n_poses, preset.n_sources)
+    scene.save(out / "scenes" / f"scene_{index:04d}.json")
+    world = World(scene)
+    n_irs = preset.n_poses + preset.n_sources
+    audio = np.zeros((_block(preset), FS), np.float32)
+    images = np.zeros((_block(preset), 64, 25), np.uint8)
+    irs = np.zeros((n_irs, FS), np.float32)
+    rows = []
+    base = index * _block(preset)
+    for k in range(n_irs):
+        is_echo = k < preset.n_poses
+        pose = scene.poses[k % preset.n_poses]
+        image = crop(world, pose)
+        if is_echo:
+            ir = device_impulse_response(scene, pose, cache=cache)[0]
+            disc = scene.discontinuities[pose.target]
+            label = {"surface": pose.target, "is_open": int(disc.is_open), "material": disc.material or "",
+                     "depth_m": round(scene.depth_m(pose), 5), "incidence_deg": round(scene.incidence_deg(pose), 3),
+                     "src_x": np.nan, "src_y": np.nan, "src_z": np.nan}
+        else:
+            src = scene.sources[k - preset.n_poses]
+            ir = impulse_responses(scene, src.position, pose.microphone[None], cache=cache)[0]
+            rel = pose.rotation.T @ (np.asarray(src.position) - pose.emitter)
+            label = {"surface": -1, "is_open": -1, "material": "", "depth_m": np.nan, "incidence_deg": np.nan,
+                     "src_x": round(rel[0], 5), "src_y": round(rel[1], 5), "src_z": round(rel[2], 5)}
+        irs[k] = ir
+        for j, name in enumerate(SOUNDS):
+            row = len(rows)
+            sound_seed = int(rng.integers(2 ** 31))
+            sound = emitted_sound(name, FS, np.random.default_rng(sound_seed))
+            snr, self_noise, gain = rng.uniform(20, 40), rng.uniform(55, 70), rng.uniform(-6, 0)
+            if is_echo:
+                onset = np.nan
+                x = record_pulse(ir, sound, np.linalg.norm(pose.microphone - pose.emitter), rng, snr, self_noise,
+                                 gain)
+            else:
+                onset = rng.uniform(0, 0.1)
+                x = record_source(ir, sound, onset, np.linalg.norm(pose.microphone - src.position), rng, FS, snr,
+                                  self_noise, gain + src.gain_db)
+            audio[row] = x
+            images[row] = image
+            rows.append({"frame": base + row, "scene": index, "split": split, "kind": "echo" if is_echo else "source",
+                         "pose": k % preset.n_poses, "ir": index * n_irs + k, "sound": name,
+                         "heard": int(name in TRAIN_SOUNDS), "sound_seed": sound_seed, **label,
+                         "onset_s": round(onset, 6), "snr_db": round(snr, 3), "self_noise_db": round(self_noise, 3),
+                         "gain_db": round(gain, 3)})
+    root = zarr.open_group(out / "frames.zarr", mode="r+")
+    sl = slice(base, base + len(rows))
+    root["audio"][sl] = audio.astype(np.float16)
+    root["image"][sl] = images
+    root["logmel"][sl] = logmel(audio)
+    root["ir"][index * n_irs:(index + 1) * n_irs] = irs
+    _write_rows(out / "progress" / f"scene_{index:04d}.csv", rows)
+    return rows
+
+
+def _write_rows(path: Path, rows: list[dict]) -> None:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, LABEL_COLUMNS, lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    atomic_write_text(path, buf.getvalue())
+
+
+def _worker_init() -> None:
+    # One process per core does the parallel work; keep each process's libraries single-threaded.
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+        os.environ[var] = "1"
+
+
+def generate(out: str | Path, preset: str = "tiny", seed: int = 0, workers: int | None = None,
+             cache: str | Path | None = None, progress: bool = True) -> Path:
+    """Generate (or finish) a dataset in ``out``.
+
+    Parameters
+    ----------
+    out : path
+        Dataset folder; created if missing. A folder holding another preset or seed is refused.
+    preset : {"tiny", "default"}
+        ``tiny``: 6 rooms, 4 poses or sources each, 16 sounds (384 frames), for tests.
+        ``default``: 160 rooms, 8 poses and 2 sources each (20 480 echo and 5 120 source frames).
+    seed : int
+        Everything (rooms, poses, sounds, noise, ray tracing) follows from it.
+    workers : int, optional
+        Processes; one per core by default.
+    cache : path, optional
+        Impulse-response cache folder (default: :func:`vrecho.acoustics.default_cache_dir`).
+    progress : bool
+        Show a progress bar.
+    """
+    import zarr
+    from tqdm import tqdm
+
+    if preset not in PRESETS:
+        raise VrechoError(f"preset: expected one of {tuple(PRESETS)}, got {preset!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise VrechoError(f"seed: expected a non-negative integer, got {seed!r}")
+    workers = (os.cpu_count() or 1) if workers is None else workers
+    if workers < 1:
+        raise VrechoError(f"workers: expected at least 1, got {workers}")
+    out = ensure_writable_dir(out)
+    p = PRESETS[preset]
+    manifest_path = out / "manifest.json"
+    identity = {"format": "vrecho-dataset", "version": FORMAT_VERSION, "preset": preset, "seed": int(seed)}
+    if manifest_path.exists():
+        old = json.loads(manifest_path.read_text())
+        if {k: old.get(k) for k in identity} != identity:
+            raise VrechoError(f"out: {out} holds another dataset ({old.get('preset')}, seed {old.get('seed')}); "
+                              "choose an empty folder")
+        if old.get("complete"):
+            return out
+    elif any(out.iterdir()):
+        raise VrechoError(f"out: {out} is not empty and holds no vrecho dataset; choose an empty folder")
+    splits = _splits(p, seed)
+    n_frames = p.n_scenes * _block(p)
+    n_irs = p.n_scenes * (p.n_poses + p.n_sources)
+    manifest = {**identity, "complete": False, "preset_settings": asdict(p), "fs": FS, "sounds": list(SOUNDS),
+                "train_sounds": list(TRAIN_SOUNDS), "n_frames": n_frames, "n_irs": n_irs,
+                "scene_splits": splits}
+    atomic_write_text(manifest_path, json.dumps(manifest, indent=1))
+    (out / "scenes").mkdir(exist_ok=True)
+    (out / "progress").mkdir(exist_ok=True)
+    root = zarr.open_group(out / "frames.zarr", mode="a")
+    block = len(SOUNDS)  # one chunk per impulse response: a scene always writes whole chunks
+    for name, shape, chunks, dtype in (("audio", (n_frames, FS), (block, FS), "float16"),
+                                       ("logmel", (n_frames, 62, 25), (block, 62, 25), "float32"),
+                                       ("image", (n_frames, 64, 25), (block, 64, 25), "uint8"),
+                                       ("ir", (n_irs, FS), (1, FS), "float32")):
+        if name not in root:
+            root.create_array(name, shape=shape, chunks=chunks, dtype=dtype, fill_value=0)
+    todo = [i for i in range(p.n_scenes) if not (out / "progress" / f"scene_{i:04d}.csv").exists()]
+    start = time.time()
+    bar = tqdm(total=p.n_scenes, initial=p.n_scenes - len(todo), unit="room", desc=f"generate {preset}",
+               disable=not progress)
+    try:
+        if workers == 1 or len(todo) <= 1:
+            for i in todo:
+                _scene_rows(out, i, preset, seed, splits[i], cache)
+                bar.update()
+        else:
+            import multiprocessing
+
+            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                                     initializer=_worker_init) as pool:
+                futures = [pool.submit(_scene_rows, out, i, preset, seed, splits[i], cache) for i in todo]
+                try:
+                    for f in as_completed(futures):
+                        f.result()
+                        bar.update()
+                except BaseException:
+                    for f in futures:
+                        f.cancel()
+                    raise
+    finally:
+        bar.close()
+    rows = []
+    for i in range(p.n_scenes):
+        with open(out / "progress" / f"scene_{i:04d}.csv", newline="") as f:
+            rows.extend(csv.DictReader(f))
+    _write_rows(out / "labels.csv", rows)
+    manifest.update(complete=True, seconds_last_run=round(time.time() - start, 1))
+    atomic_write_text(manifest_path, json.dumps(manifest, indent=1))
+    return out
+
+
+class Dataset:
+    """A finished dataset folder: arrays (lazy, Zarr) and labels (NumPy columns).
+
+    ``labels[column]`` is a NumPy array per column of :data:`LABEL_COLUMNS`; ``audio``,
+    ``logmel``, ``image`` and ``ir`` are Zarr arrays (index them to read).
+    """
+
+    def __init__(self, path: str | Path):
+        import zarr
+
+        self.path = Path(path)
+        manifest_path = self.path / "manifest.json"
+        if not manifest_path.exists():
+            raise VrechoError(f"dataset {self.path}: no manifest.json; not a vrecho dataset")
+        self.manifest = json.loads(manifest_path.read_text())
+        if not self.manifest.get("complete"):
+            raise VrechoError(f"dataset {self.path}: unfinished; run `vrecho generate` again to complete it")
+        root = zarr.open_group(self.path / "frames.zarr", mode="r")
+        self.audio, self.logmel, self.image, self.ir = root["audio"], root["logmel"], root["image"], root["ir"]
+        self.labels = read_labels(self.path / "labels.csv")
+
+    def __len__(self) -> int:
+        return len(self.labels["frame"])
+
+    def mask(self, split: str | None = None, kind: str | None = "echo", heard: bool | None = None) -> np.ndarray:
+        """Boolean mask of frames by room split, frame kind and whether the sound is a train sound."""
+        m = np.ones(len(self), bool)
+        if split is not None:
+            m &= self.labels["split"] == split
+        if kind is not None:
+            m &= self.labels["kind"] == kind
+        if heard is not None:
+            m &= self.labels["heard"] == int(heard)
+        return m
+
+    def paper_split(self, split: str) -> np.ndarray:
+        """PROTOCOL.md's benchmark: train sounds in train/val rooms, held-out sounds in test rooms."""
+        return self.mask(split, "echo", heard=split != "test")
+
+    def emitted(self, frame: int) -> np.ndarray:
+        """The exact sound emitted for a frame (regenerated from its seed)."""
+        return emitted_sound(str(self.labels["sound"][frame]), FS,
+                             np.random.default_rng(int(self.labels["sound_seed"][frame])))
+
+    def scene(self, index: int):
+        from .scene import load_scene
+
+        return load_scene(self.path / "scenes" / f"scene_{index:04d}.json")
+
+
+def read_labels(path: str | Path) -> dict[str, np.ndarray]:
+    """``labels.csv`` as a dict of NumPy columns (ints, floats or strings by column)."""
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    out = {}
+    for col in LABEL_COLUMNS:
+        vals = [r[col] for r in rows]
+        if col in ("split", "kind", "sound", "material"):
+            out[col] = np.array(vals, dtype=str)
+        elif col in ("frame", "scene", "pose", "ir", "heard", "sound_seed", "surface", "is_open"):
+            out[col] = np.array(vals, dtype=np.int64)
+        else:
+            out[col] = np.array(vals, dtype=np.float64)
+    return out
+
+
+def open_dataset(path: str | Path) -> Dataset:
+    """Open a finished dataset folder (see :class:`Dataset`)."""
+    return Dataset(path)
