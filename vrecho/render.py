@@ -101,7 +101,7 @@ class World:
             dist = rng.uniform(2.0, 14.0)
             c = (lo + hi) / 2 + (np.linalg.norm(hi - lo) / 2 + dist) * np.array([np.cos(ang), np.sin(ang)])
             size = np.r_[rng.uniform(1.0, 6.0, 2), rng.uniform(2.0, 12.0)]
-            self._add_box(np.r_[c - size[:2] / 2, 0.0], np.r_[c + size[:2] / 2, size[2]], rng.uniform(0.15, 0.85),
+            self._add_box(np.r_[c - size[:2] / 2, 0.0], np.r_[c + size[:2] / 2, size[2]], rng.uniform(0.3, 0.9),
                           int(rng.integers(4, 6)))
 
     def _add(self, corners: np.ndarray, kind: int, albedo: float, sees_through: bool, pattern: int) -> None:
@@ -171,20 +171,20 @@ class World:
                 break
             t, gid, n = self.cast(origins, dirs)
             miss = gid < 0
-            out[idx[miss]] += weight[miss] * (0.75 + 0.2 * np.clip(dirs[miss, 2], 0, 1))  # sky
+            np.add.at(out, idx[miss], weight[miss] * (0.75 + 0.2 * np.clip(dirs[miss, 2], 0, 1)))  # sky
             hit = ~miss
             kind = np.full(len(idx), -1)
             kind[hit] = kinds[gid[hit]]
             pts = origins + np.where(np.isfinite(t), t, 0)[:, None] * dirs
             diffuse = kind == _DIFFUSE
-            out[idx[diffuse]] += weight[diffuse] * self.shade(pts[diffuse], n[diffuse], gid[diffuse])
+            np.add.at(out, idx[diffuse], weight[diffuse] * self.shade(pts[diffuse], n[diffuse], gid[diffuse]))
             refl = _reflect(dirs, n)
             new_o, new_d, new_w, new_i = [], [], [], []
             last = bounce == MAX_BOUNCES
             for mask, d, w in ((kind == _GLASS, dirs, GLASS_TRANSMIT), (kind == _GLASS, refl, GLASS_REFLECT),
                                (kind == _MIRROR, refl, MIRROR_REFLECT)):
                 if last:  # out of bounces: what is left looks like a dim wall
-                    out[idx[mask]] += weight[mask] * w * 0.4
+                    np.add.at(out, idx[mask], weight[mask] * w * 0.4)
                     continue
                 new_o.append(pts[mask] + 1e-3 * d[mask])
                 new_d.append(d[mask])

@@ -1,0 +1,129 @@
+"""What the device hears in front of each surface of a scene: simulated frames with vrecho's
+probe, the echo read back from them by deconvolution, and the truth beside it.
+
+This is what ``vrecho demo`` runs until the full pipeline (EchoCNN, repair, export) lands.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .acoustics import device_impulse_response, echo_delay_s, record_pulse
+from .features import echo_response, logmel
+from .io import ensure_writable_dir
+from .scene import Scene, builtin_scene, load_scene
+from .signals import FS, emitted_sound, probe
+
+ECHO_WINDOW_S = 0.3e-3
+
+
+@dataclass
+class Observation:
+    """One device pose: the truth about the surface it faces and what its microphone heard."""
+
+    pose: int
+    surface: int
+    kind: str
+    depth_m: float
+    incidence_deg: float
+    echo_delay_ms: float  # expected, from geometry
+    echo_level_db: float  # measured: echo peak at that delay relative to the direct sound
+    frame: np.ndarray  # the probe's 1 s frame
+    response: np.ndarray  # impulse response estimated from it (first 30 ms)
+
+
+def listen(scene: Scene, rng: np.random.Generator | None = None, progress: bool = True) -> list[Observation]:
+    """Simulate the probe at every pose of ``scene`` that faces a discontinuity."""
+    from tqdm import tqdm
+
+    rng = np.random.default_rng(0) if rng is None else rng
+    sound = probe()
+    out = []
+    for i, pose in enumerate(tqdm(scene.poses, desc="simulate poses", unit="pose", disable=not progress)):
+        if pose.target is None:
+            continue
+        ir = device_impulse_response(scene, pose)[0]
+        frame = record_pulse(ir, sound, np.linalg.norm(pose.microphone - pose.emitter), rng, snr_db=30)
+        h = echo_response(frame, sound)
+        direct = int(np.argmax(np.abs(h[:int(0.002 * FS)])))
+        delay = echo_delay_s(scene, pose)
+        centre, half = direct + int(round(delay * FS)), int(round(ECHO_WINDOW_S * FS))
+        echo = np.max(np.abs(h[centre - half:centre + half + 1]))
+        d = scene.discontinuities[pose.target]
+        out.append(Observation(i, pose.target, d.kind, scene.depth_m(pose), scene.incidence_deg(pose), 1e3 * delay,
+                               float(20 * np.log10(echo / np.abs(h[direct]))), frame, h))
+    return out
+
+
+def table(observations: list[Observation]) -> str:
+    """The observations as a Markdown table."""
+    lines = ["| pose | surface | kind | depth (m) | incidence (deg) | echo delay (ms) | echo level (dB re direct) |",
+             "|---:|---:|:---|---:|---:|---:|---:|"]
+    for o in observations:
+        lines.append(f"| {o.pose} | {o.surface} | {o.kind} | {o.depth_m:.2f} | {o.incidence_deg:.1f} | "
+                     f"{o.echo_delay_ms:.2f} | {o.echo_level_db:.1f} |")
+    return "\n".join(lines)
+
+
+def figure(scene: Scene, observations: list[Observation], path: Path) -> Path:
+    """Per surface: the clap's log-mel spectrogram, the probe's echo response with the expected
+    echo marked, and the camera's crop."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .render import World, crop
+
+    world = World(scene)
+    first = {}
+    for o in observations:
+        first.setdefault(o.surface, o)
+    fig, axes = plt.subplots(3, len(first), figsize=(3.2 * len(first), 8.5), squeeze=False,
+                             gridspec_kw={"height_ratios": [1, 1, 1.3]})
+    rng = np.random.default_rng(1)
+    for col, o in enumerate(first.values()):
+        pose = scene.poses[o.pose]
+        ir = device_impulse_response(scene, pose)[0]
+        clap = record_pulse(ir, emitted_sound("clap", FS, rng), 0.07, rng)
+        axes[0, col].imshow(logmel(clap), origin="lower", aspect="auto", cmap="magma")
+        axes[0, col].set_title(f"{o.kind}, {o.depth_m:.2f} m\nclap log-mel (62 x 25)", fontsize=9)
+        axes[0, col].set_xlabel("time bin (40 ms)")
+        t = 1e3 * np.arange(len(o.response)) / FS
+        env = np.abs(o.response) / np.max(np.abs(o.response))
+        axes[1, col].plot(t, 20 * np.log10(np.maximum(env, 1e-4)), lw=0.7)
+        axes[1, col].plot([o.echo_delay_ms + 1e3 * 0.07 / 343], [0], "rv", ms=6, label="expected echo")
+        axes[1, col].set_ylim(-70, 3)
+        axes[1, col].set_xlabel("ms after emission")
+        axes[1, col].set_ylabel("dB")
+        axes[1, col].legend(fontsize=7, loc="upper right")
+        axes[1, col].set_title("probe: deconvolved response", fontsize=9)
+        axes[2, col].imshow(crop(world, pose), cmap="gray", vmin=0, vmax=255)
+        axes[2, col].set_title("camera crop (64 x 25)", fontsize=9)
+        axes[2, col].axis("off")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def run_demo(out: str | Path, scene_path: str | Path | None = None, quiet: bool = False) -> list[Observation]:
+    """Simulate a scene (the built-in living room by default), print what the device hears in front
+    of each surface against the truth, and write the recordings (WAV) and a figure to ``out``."""
+    import soundfile as sf
+
+    scene = builtin_scene() if scene_path is None else load_scene(scene_path)
+    out = ensure_writable_dir(out)
+    observations = listen(scene, progress=not quiet)
+    print(f"scene {scene.name!r}: {len(scene.discontinuities)} discontinuities, {len(scene.poses)} poses, "
+          f"{len(scene.sources)} sound sources")
+    print(table(observations))
+    rec = ensure_writable_dir(out / "recordings")
+    for o in observations:
+        sf.write(rec / f"pose_{o.pose:02d}_{o.kind}.wav", o.frame, FS, subtype="FLOAT")
+    fig = figure(scene, observations, out / "surfaces.png")
+    print(f"wrote {len(observations)} recordings to {rec} and the figure {fig}")
+    return observations
