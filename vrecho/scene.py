@@ -728,8 +728,9 @@ def _try_random_scene(rng, name, n_poses, n_sources, n_discontinuities) -> Scene
             z0 = float(rng.uniform(0.0 if kind == "mirror" else 0.2, height - 0.05 - h)) if height - 0.05 - h > 0.2 else 0.05
         u_c = float(rng.uniform(width / 2 + 0.05, length - width / 2 - 0.05))
         absorption = (1.0,) * 7 if kind == "open" else _closed_absorption(kind, rng)
+        width, h, z0, u_c = (round(v, 3) for v in (width, h, z0, u_c))  # centres stay exact edges
         scene.discontinuities.append(Discontinuity(
-            w, round(u_c, 4), round(z0 + h / 2, 4), round(width, 4), round(h, 4), kind, absorption,
+            w, u_c, z0 + h / 2, width, h, kind, absorption,
             float(np.round(rng.uniform(0.01, 0.05), 3)), bool(rng.random() < 0.5)))
 
     for k in range(n_poses):

@@ -1,0 +1,60 @@
+import numpy as np
+import pytest
+
+from vrecho.errors import VrechoError
+from vrecho.features import echo_features, echo_response, logmel
+from vrecho.signals import FS, emitted_sound, probe
+
+
+def _frame(delays_gains, sound):
+    h = np.zeros(FS)
+    for k, g in delays_gains:
+        h[k] = g
+    return np.fft.irfft(np.fft.rfft(h) * np.fft.rfft(sound, FS), FS).astype(np.float32)
+
+
+def test_logmel_shape_and_normalisation():
+    x = _frame([(9, 1.0), (300, 0.3)], emitted_sound("clap"))
+    x += 1e-3 * np.random.default_rng(0).standard_normal(FS).astype(np.float32)  # a microphone's noise floor
+    s = logmel(x, FS)
+    assert s.shape == (62, 25) and s.dtype == np.float32
+    assert abs(s.mean()) < 1e-4 and abs(s.std() - 1) < 1e-3
+    batch = logmel(np.stack([x, 0.5 * x]), FS)
+    assert batch.shape == (2, 62, 25) and np.allclose(batch[0], batch[1], atol=1e-3)  # level-invariant
+
+
+def test_other_rates_are_resampled():
+    x = _frame([(9, 1.0)], emitted_sound("white_noise"))
+    import librosa
+
+    x48 = librosa.resample(x, orig_sr=FS, target_sr=48000)[:48000]
+    assert np.abs(logmel(x48, 48000) - logmel(x, FS)).mean() < 0.1
+
+
+@pytest.mark.parametrize("audio, fs, message", [
+    (np.zeros(1000), FS, "a frame is 1 s"),
+    (np.full(FS, np.nan), FS, "NaN"),
+    (np.zeros(FS), -1, "fs"),
+    (np.zeros((2, 3, FS)), FS, "1-D frame or a 2-D batch"),
+])
+def test_bad_frames(audio, fs, message):
+    with pytest.raises(VrechoError, match=message):
+        logmel(audio, fs)
+
+
+def test_echo_response_recovers_delays_with_a_broadband_sound():
+    sound = probe()
+    x = _frame([(9, 1.0), (257, 0.2), (700, 0.05)], sound)
+    h = echo_response(x, sound, FS)
+    assert h.shape == (1323,)
+    for lo, hi, k in ((0, 100, 9), (100, 500, 257), (500, 1323, 700)):
+        assert lo + np.argmax(np.abs(h[lo:hi])) == k
+    assert np.isclose(h[257] / h[9], 0.2, atol=0.01)
+    f = echo_features(x, sound, FS)
+    assert f.envelope.shape == (1323,) and f.bands.shape == (7, 20)
+    assert np.isclose(f.envelope[257], 0.2, atol=0.03)
+
+
+def test_echo_response_needs_a_sound():
+    with pytest.raises(VrechoError, match="silent"):
+        echo_response(np.zeros(FS), np.zeros(4410), FS)
