@@ -54,3 +54,18 @@ def test_echo_delay_and_opening_energy(depth, tmp_path):
             assert abs(t_echo / FS - 2 * depth / SPEED_OF_SOUND) < 0.2e-3
             assert abs((t_echo - t_direct) - expected) / FS < 0.03e-3  # a sub-sample read of the echo
     assert 10 * np.log10(energies["glass"] / energies["open"]) >= 10.0
+
+
+def test_headset_array_hears_each_microphone_at_its_distance(tmp_path):
+    from vrecho.acoustics import impulse_responses
+    from vrecho.scene import MIC_ARRAYS
+
+    scene = _scene("glass")
+    pose = face(scene, 0, 1.5)
+    mics = pose.microphones(MIC_ARRAYS["headset4"])
+    source = np.array([6.5, 5.0, 1.0])
+    irs = impulse_responses(scene, source, mics, cache=tmp_path)
+    assert irs.shape == (4, FS)
+    arrivals = np.array([_peak_time(h, 2, 2000) for h in irs])
+    expected = np.linalg.norm(mics - source, axis=1) / SPEED_OF_SOUND * FS
+    assert np.all(np.abs(arrivals - expected) < 0.25)  # sub-sample time differences of arrival
