@@ -60,8 +60,9 @@ def test_splits_are_by_room_and_the_paper_protocol(tiny_dataset):
 
 def test_interrupted_generate_resumes_and_the_seed_fixes_every_array(tiny_dataset, tmp_path):
     out = tmp_path / "ds"
+    # One worker makes the interruption deterministic: rooms run one after another.
     cmd = [sys.executable, "-m", "vrecho", "generate", "--out", str(out), "--preset", "tiny", "--seed", "0",
-           "--workers", "2", "--cache", str(tmp_path / "cache"), "--quiet"]
+           "--workers", "1", "--cache", str(tmp_path / "cache"), "--quiet"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 300
     while not list((out / "progress").glob("*.csv")) if (out / "progress").exists() else True:
@@ -71,7 +72,7 @@ def test_interrupted_generate_resumes_and_the_seed_fixes_every_array(tiny_datase
     _, err = proc.communicate(timeout=300)
     assert proc.returncode == 130 and "rerun" in err
     finished = {p.name: p.read_bytes() for p in (out / "progress").glob("*.csv")}
-    assert 1 <= len(finished) < 6
+    assert 1 <= len(finished) <= 2
     assert not json.loads((out / "manifest.json").read_text())["complete"]
     with pytest.raises(VrechoError, match="unfinished"):
         open_dataset(out)

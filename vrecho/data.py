@@ -237,8 +237,8 @@ def generate(out: str | Path, preset: str = "tiny", seed: int = 0, workers: int 
                         f.result()
                         bar.update()
                 except BaseException:
-                    for f in futures:
-                        f.cancel()
+                    # Rooms already running finish and are kept; the rest wait for a rerun.
+                    pool.shutdown(wait=True, cancel_futures=True)
                     raise
     finally:
         bar.close()
