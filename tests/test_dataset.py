@@ -63,7 +63,10 @@ def test_interrupted_generate_resumes_and_the_seed_fixes_every_array(tiny_datase
     # One worker makes the interruption deterministic: rooms run one after another.
     cmd = [sys.executable, "-m", "vrecho", "generate", "--out", str(out), "--preset", "tiny", "--seed", "0",
            "--workers", "1", "--cache", str(tmp_path / "cache"), "--quiet"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # A shell that starts jobs in the background (nohup, CI runners) passes SIGINT on as ignored;
+    # restore the default so the child turns it into KeyboardInterrupt like a terminal's Ctrl-C.
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.time() + 300
     while not list((out / "progress").glob("*.csv")) if (out / "progress").exists() else True:
         assert proc.poll() is None and time.time() < deadline
