@@ -459,6 +459,10 @@ class Scene:
     sources: list[SoundSource] = field(default_factory=list)
     camera_path: CameraPath | None = None
     mic_array: MicArray = MIC_ARRAYS["phone"]
+    emitter_p: float = 0.7
+    """The device's loudspeaker directivity, pyroomacoustics' cardioid family: gain
+    p + (1 - p) cos(angle off the forward axis); 1 is omnidirectional, 0.5 a cardioid. A phone's
+    speaker in its body radiates forward: 0.7 is about 3 dB down at 90 degrees, 8 dB behind."""
 
     def __post_init__(self):
         self.validate()
@@ -466,6 +470,7 @@ class Scene:
     # -- checks ---------------------------------------------------------------------------------
     def validate(self) -> None:
         """Raise :class:`VrechoError` naming the first field that is impossible."""
+        _number(self.emitter_p, "scene.emitter_p", 0.0, 1.0)
         room = self.room
         lengths = room.wall_lengths
         spans: dict[int, list] = {}
@@ -552,7 +557,7 @@ class Scene:
                 "discontinuities": [d.to_dict() for d in self.discontinuities],
                 "poses": [p.to_dict() for p in self.poses], "sources": [s.to_dict() for s in self.sources],
                 "camera_path": None if self.camera_path is None else self.camera_path.to_dict(),
-                "mic_array": self.mic_array.name}
+                "mic_array": self.mic_array.name, "emitter_p": self.emitter_p}
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=1)
@@ -584,7 +589,8 @@ class Scene:
                    [Discontinuity.from_dict(x, f"discontinuities[{i}]") for i, x in enumerate(items("discontinuities"))],
                    [DevicePose.from_dict(x, f"poses[{i}]") for i, x in enumerate(items("poses"))],
                    [SoundSource.from_dict(x, f"sources[{i}]") for i, x in enumerate(items("sources"))],
-                   None if cp is None else CameraPath.from_dict(cp), MIC_ARRAYS[mic])
+                   None if cp is None else CameraPath.from_dict(cp), MIC_ARRAYS[mic],
+                   _number(d.get("emitter_p", 0.7), "scene.emitter_p", 0.0, 1.0))
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -685,7 +691,8 @@ def random_scene(rng: np.random.Generator, name: str = "scene", n_poses: int = 8
     floor and ceiling of pyroomacoustics' database; 1 to 3 discontinuities (open, glass, mirror,
     0.4 to 2.5 m on a side, glass and mirror coefficients drawn per scene); ``n_poses`` device poses
     each facing a discontinuity from 0.25 to 3 m within 15 degrees of its normal; ``n_sources``
-    ambient sources playing one of the 16 sounds.
+    ambient sources playing one of the 16 sounds; the device's loudspeaker directivity
+    (``emitter_p``) from 0.5 (cardioid) to 0.9.
     """
     for _ in range(200):
         scene = _try_random_scene(rng, name, n_poses, n_sources, n_discontinuities)
@@ -709,7 +716,8 @@ def _try_random_scene(rng, name, n_poses, n_sources, n_discontinuities) -> Scene
         walls = [Material.from_database(str(rng.choice(WALL_MATERIALS)), scat) for _ in fp]
     room = Room(fp, round(height, 3), walls, Material.from_database(str(rng.choice(FLOOR_MATERIALS)), scat),
                 Material.from_database(str(rng.choice(CEILING_MATERIALS)), scat))
-    scene = Scene(name, room)
+    # Devices differ: from a cardioid to nearly omnidirectional loudspeakers.
+    scene = Scene(name, room, emitter_p=float(np.round(rng.uniform(0.5, 0.9), 3)))
 
     n_disc = int(rng.integers(n_discontinuities[0], n_discontinuities[1] + 1))
     walls_free = list(rng.permutation(len(fp)))
