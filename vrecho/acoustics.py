@@ -6,6 +6,10 @@ reverberant tail), cached on disk under a hash of everything that shapes it, and
 each sound. Sample 0 of every impulse response returned here is the emission instant
 (pyroomacoustics' fractional-delay lag is removed).
 
+The device's loudspeaker radiates forward with the scene's directivity (``Scene.emitter_p``,
+pyroomacoustics' cardioid family) in the image-source part; the microphone is omnidirectional
+(pyroomacoustics allows no directive microphone with ray tracing).
+
 Recordings follow PROTOCOL.md: a frame is 1 s of microphone signal from the pulse onset, in the
 steady state of the pulse train (the previous pulses' tails fold into the frame), plus pink
 background noise 20 to 40 dB below the direct sound and white microphone self-noise.

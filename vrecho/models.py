@@ -27,7 +27,7 @@ HEADS = {"open": 2, "material": 2, "depth_bin": len(DEPTH_BINS_M), "depth_ft": l
 class AudioBranch(nn.Module):
     """The paper's audio sub-network: conv 3 x 3, batch normalisation, ReLU, 2 x 2 max-pool, dense."""
 
-    def __init__(self, n_filters: int = 32, hidden: int = 128):
+    def __init__(self, n_filters: int = 16, hidden: int = 128):
         super().__init__()
         self.conv = nn.Conv2d(1, n_filters, 3, padding=1)
         self.norm = nn.BatchNorm2d(n_filters)
