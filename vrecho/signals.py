@@ -166,6 +166,24 @@ def probe(fs: int = FS, f_lo: float = 200.0, f_hi: float = 18_000.0) -> np.ndarr
     return _shape(scipy.signal.chirp(t, f0=f_lo, t1=PULSE_S, f1=f_hi, method="logarithmic"), fs)
 
 
+def random_probe(rng: np.random.Generator, fs: int = FS) -> np.ndarray:
+    """A random broadband probe of the kind PROTOCOL.md's product protocol must accept: 100 ms
+    spanning at least 200 Hz to 16 kHz, peak 0.8 with fades. A linear or logarithmic sweep (either
+    direction) or a band-limited noise burst, with random band edges."""
+    fs = check_fs(fs)
+    n = int(round(PULSE_S * fs))
+    t = np.arange(n) / fs
+    f_lo, f_hi = rng.uniform(60, 200), rng.uniform(16_000, min(20_000, 0.45 * fs))
+    kind = rng.integers(3)
+    if kind < 2:
+        f0, f1 = (f_lo, f_hi) if rng.random() < 0.5 else (f_hi, f_lo)
+        x = scipy.signal.chirp(t, f0=f0, t1=PULSE_S, f1=f1, method="logarithmic" if kind == 0 else "linear")
+    else:
+        sos = scipy.signal.butter(4, [f_lo, f_hi], btype="band", fs=fs, output="sos")
+        x = scipy.signal.sosfilt(sos, rng.standard_normal(n + 2000))[2000:]
+    return _shape(x, fs)
+
+
 def pulse_train(sound: np.ndarray, n_periods: int, fs: int = FS) -> np.ndarray:
     """The emitter's signal: ``sound`` at the start of each 1 s period, silence in between."""
     fs = check_fs(fs)
