@@ -75,3 +75,17 @@ def test_bad_sample_rate(fs):
 def test_unknown_sound():
     with pytest.raises(VrechoError, match="unknown emitted sound"):
         emitted_sound("trumpet")
+
+
+def test_random_probes_span_the_product_band():
+    from vrecho.signals import random_probe
+
+    rng = np.random.default_rng(0)
+    f = np.fft.rfftfreq(1 << 16, 1 / FS)
+    for _ in range(12):
+        x = random_probe(rng)
+        assert x.shape == (4410,) and np.isclose(np.abs(x).max(), 0.8)
+        power = np.abs(np.fft.rfft(x, 1 << 16)) ** 2
+        level = 10 * np.log10(power / power.max())
+        for lo, hi in ((200, 300), (15000, 16000)):  # both ends of 200 Hz to 16 kHz are excited
+            assert level[(f >= lo) & (f < hi)].max() > -45
