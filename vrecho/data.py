@@ -152,7 +152,8 @@ def _write_rows(path: Path, rows: list[dict]) -> None:
 
 
 def _worker_init() -> None:
-    # One process per core does the parallel work; keep each process's libraries single-threaded.
+    # One process per core does the parallel work: libraries loaded after this (open3d's OpenMP,
+    # numba under librosa) stay single-threaded; NumPy is already loaded, and its FFTs are anyway.
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
         os.environ[var] = "1"
 
