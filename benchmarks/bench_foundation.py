@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vrecho.acoustics import device_impulse_response, record_pulse
+from vrecho.acoustics import device_direct_amplitude, device_impulse_response, record_pulse
 from vrecho.data import generate, open_dataset
 from vrecho.features import logmel
 from vrecho.render import World, crop
@@ -30,7 +30,8 @@ def _frames_for_pose(scene, world, pose, rng, ir=None):
     """All 16 frames of one pose (vrecho's way: one impulse response, 16 convolutions)."""
     ir = device_impulse_response(scene, pose, cache=False)[0] if ir is None else ir
     crop(world, pose)
-    frames = np.stack([record_pulse(ir, emitted_sound(s, FS, rng), 0.07, rng) for s in SOUNDS])
+    direct = device_direct_amplitude(scene, pose)
+    frames = np.stack([record_pulse(ir, emitted_sound(s, FS, rng), direct, rng) for s in SOUNDS])
     logmel(frames)
     return frames
 
@@ -68,7 +69,7 @@ def main() -> None:
         for name in SOUNDS[:4]:
             ir = device_impulse_response(s, p, cache=False)[0]
             crop(w, p)
-            logmel(record_pulse(ir, emitted_sound(name, FS, rng), 0.07, rng)[None])
+            logmel(record_pulse(ir, emitted_sound(name, FS, rng), device_direct_amplitude(s, p), rng)[None])
             n_base += 1
     t_base = (time.perf_counter() - t) / n_base
 

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from vrecho.acoustics import SPEED_OF_SOUND, device_impulse_response, echo_delay_s, record_pulse
+from vrecho.acoustics import (SPEED_OF_SOUND, device_direct_amplitude, device_impulse_response, echo_delay_s,
+                              record_pulse)
 from vrecho.features import echo_response
 from vrecho.scene import Discontinuity, Material, Room, Scene, WINDOW_GLASS, face
 from vrecho.signals import FS, probe
@@ -37,7 +38,8 @@ def test_echo_delay_and_opening_energy(depth, tmp_path):
         scene = _scene(kind)
         pose = face(scene, 0, depth, offset_z_m=-0.1)  # emitter 1.2 m above the floor
         ir = device_impulse_response(scene, pose, cache=tmp_path)[0]
-        frame = record_pulse(ir, sound, 0.07, np.random.default_rng(0), snr_db=40, self_noise_db=70)
+        frame = record_pulse(ir, sound, device_direct_amplitude(scene, pose), np.random.default_rng(0), snr_db=40,
+                             self_noise_db=70)
         h = echo_response(frame, sound, FS)
         t_direct = _peak_time(h, 2, 40)
         expected = echo_delay_s(scene, pose) * FS  # image-source geometry: mic 7 cm above emitter
@@ -69,3 +71,13 @@ def test_headset_array_hears_each_microphone_at_its_distance(tmp_path):
     arrivals = np.array([_peak_time(h, 2, 2000) for h in irs])
     expected = np.linalg.norm(mics - source, axis=1) / SPEED_OF_SOUND * FS
     assert np.all(np.abs(arrivals - expected) < 0.25)  # sub-sample time differences of arrival
+
+
+@pytest.mark.parametrize("p", [1.0, 0.7, 0.5])
+def test_direct_sound_level_includes_the_loudspeaker_directivity(p, tmp_path):
+    # The noise is set relative to the direct sound, so its level must match the simulator's.
+    scene = _scene("glass")
+    scene.emitter_p = p
+    pose = face(scene, 0, 1.0)
+    ir = device_impulse_response(scene, pose, cache=tmp_path)[0]
+    assert np.isclose(np.abs(ir[:30]).max(), device_direct_amplitude(scene, pose), rtol=0.02)

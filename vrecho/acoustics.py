@@ -216,10 +216,20 @@ def device_impulse_response(scene: Scene, pose: DevicePose, array: MicArray | No
     return impulse_responses(scene, pose.emitter, pose.microphones(array), fs, sim, cache, facing=pose.forward)
 
 
-def direct_amplitude(distance_m: float) -> float:
-    """Free-field amplitude of the direct path at ``distance_m`` for a unit source: 1 / r, the
-    convention of pyroomacoustics 0.10 (checked: 14.2 at 7 cm, not 1 / 4 pi r)."""
-    return 1.0 / max(distance_m, 1e-3)
+def direct_amplitude(distance_m: float, gain: float = 1.0) -> float:
+    """Amplitude of the direct path at ``distance_m`` for a unit source radiating with ``gain``
+    toward the microphone: gain / r, the convention of pyroomacoustics 0.10 (checked: 14.2 at
+    7 cm, not 1 / 4 pi r)."""
+    return gain / max(distance_m, 1e-3)
+
+
+def device_direct_amplitude(scene: Scene, pose: DevicePose) -> float:
+    """Amplitude of the device's own direct sound at its microphone (the loudspeaker's
+    directivity toward the microphone, 7 cm above it, included)."""
+    offset = pose.microphone - pose.emitter
+    r = float(np.linalg.norm(offset))
+    cos = float(np.dot(pose.forward, offset)) / r
+    return direct_amplitude(r, scene.emitter_p + (1 - scene.emitter_p) * cos)
 
 
 def _noise(shape, level_rms: float, snr_db: float, self_noise_db: float, rng: np.random.Generator) -> np.ndarray:
@@ -229,7 +239,7 @@ def _noise(shape, level_rms: float, snr_db: float, self_noise_db: float, rng: np
     return level_rms * (10 ** (-snr_db / 20) * pink + 10 ** (-self_noise_db / 20) * white)
 
 
-def record_pulse(ir: np.ndarray, sound: np.ndarray, direct_distance_m: float, rng: np.random.Generator,
+def record_pulse(ir: np.ndarray, sound: np.ndarray, direct_amp: float, rng: np.random.Generator,
                  snr_db: float = 30.0, self_noise_db: float = 60.0, gain_db: float = 0.0) -> np.ndarray:
     """One 1 s frame of the device hearing its own pulse train.
 
@@ -239,8 +249,9 @@ def record_pulse(ir: np.ndarray, sound: np.ndarray, direct_distance_m: float, rn
         Impulse responses from :func:`impulse_responses` (n samples = one period).
     sound : array, shape (k,)
         The emitted sound (k <= n).
-    direct_distance_m : float
-        Emitter-to-microphone distance, which sets the direct sound's level for the noise.
+    direct_amp : float
+        Amplitude of the direct path (:func:`device_direct_amplitude`): the noise levels are
+        relative to the direct sound.
     snr_db, self_noise_db : float
         Pink background noise and white self-noise, in dB below the direct sound.
     gain_db : float
@@ -257,16 +268,17 @@ def record_pulse(ir: np.ndarray, sound: np.ndarray, direct_distance_m: float, rn
     if sound.ndim != 1 or sound.size > n:
         raise VrechoError(f"sound: must be 1-D and at most {n} samples, got shape {sound.shape}")
     x = np.fft.irfft(np.fft.rfft(ir, n) * np.fft.rfft(sound, n), n)
-    level = direct_amplitude(direct_distance_m) * np.sqrt(np.mean(sound ** 2))
+    level = direct_amp * np.sqrt(np.mean(sound ** 2))
     x += _noise(x.shape, level, snr_db, self_noise_db, rng)
     return (x * MIC_SENSITIVITY * 10 ** (gain_db / 20)).astype(np.float32)
 
 
-def record_source(ir: np.ndarray, sound: np.ndarray, onset_s: float, direct_distance_m: float,
+def record_source(ir: np.ndarray, sound: np.ndarray, onset_s: float, direct_amp: float,
                   rng: np.random.Generator, fs: int = FS, snr_db: float = 30.0, self_noise_db: float = 60.0,
                   gain_db: float = 0.0) -> np.ndarray:
     """1 s of microphone signal while an ambient source plays ``sound`` once, starting ``onset_s``
-    into the frame (linear convolution: the source is not periodic)."""
+    into the frame (linear convolution: the source is not periodic). ``direct_amp``: as in
+    :func:`record_pulse` (:func:`direct_amplitude` of the source's distance)."""
     ir = np.asarray(ir, dtype=np.float64)
     n = ir.shape[-1]
     start = int(round(onset_s * check_fs(fs)))
@@ -277,7 +289,7 @@ def record_source(ir: np.ndarray, sound: np.ndarray, onset_s: float, direct_dist
     excitation[start:start + k] = sound[:k]
     m = 2 * n
     x = np.fft.irfft(np.fft.rfft(ir, m) * np.fft.rfft(excitation, m), m)[..., :n]
-    level = direct_amplitude(direct_distance_m) * np.sqrt(np.mean(np.asarray(sound, dtype=float) ** 2))
+    level = direct_amp * np.sqrt(np.mean(np.asarray(sound, dtype=float) ** 2))
     x += _noise(x.shape, level, snr_db, self_noise_db, rng)
     return (x * MIC_SENSITIVITY * 10 ** (gain_db / 20)).astype(np.float32)
 

@@ -80,7 +80,8 @@ def _scene_rows(out: Path, index: int, preset_name: str, seed: int, split: str, 
     """Simulate one room, write its arrays and return its label rows."""
     import zarr
 
-    from .acoustics import device_impulse_response, impulse_responses, record_pulse, record_source
+    from .acoustics import (device_direct_amplitude, device_impulse_response, direct_amplitude, impulse_responses,
+                            record_pulse, record_source)
     from .features import logmel
     from .render import World, crop
     from .scene import random_scene
@@ -120,12 +121,11 @@ def _scene_rows(out: Path, index: int, preset_name: str, seed: int, split: str, 
             snr, self_noise, gain = rng.uniform(20, 40), rng.uniform(55, 70), rng.uniform(-6, 0)
             if is_echo:
                 onset = np.nan
-                x = record_pulse(ir, sound, np.linalg.norm(pose.microphone - pose.emitter), rng, snr, self_noise,
-                                 gain)
+                x = record_pulse(ir, sound, device_direct_amplitude(scene, pose), rng, snr, self_noise, gain)
             else:
                 onset = rng.uniform(0, 0.1)
-                x = record_source(ir, sound, onset, np.linalg.norm(pose.microphone - src.position), rng, FS, snr,
-                                  self_noise, gain + src.gain_db)
+                x = record_source(ir, sound, onset, direct_amplitude(np.linalg.norm(pose.microphone - src.position)),
+                                  rng, FS, snr, self_noise, gain + src.gain_db)
             audio[row] = x
             images[row] = image
             rows.append({"frame": base + row, "scene": index, "split": split, "kind": "echo" if is_echo else "source",

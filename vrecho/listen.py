@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .acoustics import device_impulse_response, echo_delay_s, record_pulse
+from .acoustics import device_direct_amplitude, device_impulse_response, echo_delay_s, record_pulse
 from .features import echo_response, logmel
 from .io import ensure_writable_dir
 from .scene import Scene, builtin_scene, load_scene
@@ -46,7 +46,7 @@ def listen(scene: Scene, rng: np.random.Generator | None = None, progress: bool 
         if pose.target is None:
             continue
         ir = device_impulse_response(scene, pose)[0]
-        frame = record_pulse(ir, sound, np.linalg.norm(pose.microphone - pose.emitter), rng, snr_db=30)
+        frame = record_pulse(ir, sound, device_direct_amplitude(scene, pose), rng, snr_db=30)
         h = echo_response(frame, sound)
         direct = int(np.argmax(np.abs(h[:int(0.002 * FS)])))
         delay = echo_delay_s(scene, pose)
@@ -88,7 +88,7 @@ def figure(scene: Scene, observations: list[Observation], path: Path) -> Path:
     for col, o in enumerate(first.values()):
         pose = scene.poses[o.pose]
         ir = device_impulse_response(scene, pose)[0]
-        clap = record_pulse(ir, emitted_sound("clap", FS, rng), 0.07, rng)
+        clap = record_pulse(ir, emitted_sound("clap", FS, rng), device_direct_amplitude(scene, pose), rng)
         axes[0, col].imshow(logmel(clap), origin="lower", aspect="auto", cmap="magma")
         axes[0, col].set_title(f"{o.kind}, {o.depth_m:.2f} m\nclap log-mel (62 x 25)", fontsize=9)
         axes[0, col].set_xlabel("time bin (40 ms)")
