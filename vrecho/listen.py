@@ -79,9 +79,10 @@ def figure(scene: Scene, observations: list[Observation], path: Path) -> Path:
     from .render import World, crop
 
     world = World(scene)
-    first = {}
+    first = {}  # per surface, the pose nearest 1.5 m: its echo stands clear of the direct sound
     for o in observations:
-        first.setdefault(o.surface, o)
+        if o.surface not in first or abs(o.depth_m - 1.5) < abs(first[o.surface].depth_m - 1.5):
+            first[o.surface] = o
     fig, axes = plt.subplots(3, len(first), figsize=(3.2 * len(first), 8.5), squeeze=False,
                              gridspec_kw={"height_ratios": [1, 1, 1.3]})
     rng = np.random.default_rng(1)
@@ -95,7 +96,8 @@ def figure(scene: Scene, observations: list[Observation], path: Path) -> Path:
         t = 1e3 * np.arange(len(o.response)) / FS
         env = np.abs(o.response) / np.max(np.abs(o.response))
         axes[1, col].plot(t, 20 * np.log10(np.maximum(env, 1e-4)), lw=0.7)
-        axes[1, col].plot([o.echo_delay_ms + 1e3 * 0.07 / 343], [0], "rv", ms=6, label="expected echo")
+        t_echo = o.echo_delay_ms + 1e3 * 0.07 / 343  # after the emission
+        axes[1, col].axvspan(t_echo - 0.3, t_echo + 0.3, color="r", alpha=0.25, label="expected echo")
         axes[1, col].set_ylim(-70, 3)
         axes[1, col].set_xlabel("ms after emission")
         axes[1, col].set_ylabel("dB")
