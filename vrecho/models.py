@@ -157,3 +157,76 @@ class EchoCNN(nn.Module):
         out = {name: head(h) for name, head in self.heads.items()}
         out["depth_m"] = out["depth_m"].squeeze(1)
         return out
+
+
+class FeatureBaseline:
+    """The paper's classical baselines, kNN or a linear SVM, with EchoCNN's heads.
+
+    One scikit-learn estimator per head over the flattened, standardised inputs; ``predict``
+    returns scores shaped like EchoCNN's outputs (class scores per head, ``depth_m`` in metres),
+    so one metrics function serves both.
+
+    Parameters
+    ----------
+    kind : {"knn", "svm"}
+    inputs : tuple of {"mel", "image", "envelope", "bands"}
+        Input arrays to flatten and concatenate.
+    n_neighbors : int
+        For kNN.
+    C : float
+        Inverse regularisation, for the SVM.
+    """
+
+    def __init__(self, kind: str = "knn", inputs: tuple[str, ...] = ("mel",), n_neighbors: int = 5, C: float = 0.1):
+        if kind not in ("knn", "svm"):
+            raise ValueError(f"kind: expected knn or svm, got {kind!r}")
+        self.kind, self.inputs, self.n_neighbors, self.C = kind, tuple(inputs), n_neighbors, C
+
+    def _features(self, x: dict):
+        import numpy as np
+
+        return np.concatenate([np.asarray(x[k], dtype=np.float32).reshape(len(x[k]), -1) for k in self.inputs], axis=1)
+
+    def fit(self, x: dict, y: dict) -> "FeatureBaseline":
+        import numpy as np
+        from sklearn.dummy import DummyClassifier
+        from sklearn.neighbors import KNeighborsClassifier, KNeighborsRegressor
+        from sklearn.pipeline import make_pipeline
+        from sklearn.preprocessing import StandardScaler
+        from sklearn.svm import LinearSVC, LinearSVR
+
+        from .train import IGNORE
+
+        X = self._features(x)
+        self.models_ = {}
+        for head in HEADS:
+            t = np.asarray(y[head])
+            keep = t != IGNORE if head != "depth_m" else np.ones(len(t), bool)
+            if not keep.any():  # nothing to learn this head from: it will answer nothing
+                self.models_[head] = None
+                continue
+            if head == "depth_m":
+                est = KNeighborsRegressor(self.n_neighbors) if self.kind == "knn" else LinearSVR(C=self.C, max_iter=5000)
+            elif len(np.unique(t[keep])) == 1:
+                est = DummyClassifier(strategy="most_frequent")
+            else:
+                est = KNeighborsClassifier(self.n_neighbors) if self.kind == "knn" else LinearSVC(C=self.C, max_iter=5000)
+            self.models_[head] = make_pipeline(StandardScaler(), est).fit(X[keep], t[keep])
+        return self
+
+    def predict(self, x: dict) -> dict:
+        import numpy as np
+
+        X = self._features(x)
+        out = {}
+        for head, model in self.models_.items():
+            if model is None:
+                out[head] = torch.zeros((len(X),) if head == "depth_m" else (len(X), HEADS[head]))
+                continue
+            if head == "depth_m":
+                out[head] = torch.as_tensor(model.predict(X), dtype=torch.float32)
+                continue
+            scores = np.zeros((len(X), HEADS[head]), np.float32)  # one-hot of the predicted class
+            scores[np.arange(len(X)), model.predict(X).astype(int)] = 1.0
+            out[head] = torch.as_tensor(scores)
+        return out
