@@ -232,11 +232,17 @@ def device_direct_amplitude(scene: Scene, pose: DevicePose) -> float:
     return direct_amplitude(r, scene.emitter_p + (1 - scene.emitter_p) * cos)
 
 
-def _noise(shape, level_rms: float, snr_db: float, self_noise_db: float, rng: np.random.Generator) -> np.ndarray:
-    n = shape[-1]
-    pink = np.stack([colored_noise(n, 1.0, rng) for _ in range(int(np.prod(shape[:-1])))]).reshape(shape)
-    white = rng.standard_normal(shape)
-    return level_rms * (10 ** (-snr_db / 20) * pink + 10 ** (-self_noise_db / 20) * white)
+def _microphone(x: np.ndarray, sound: np.ndarray, direct_amp: float, rng: np.random.Generator, snr_db: float,
+                self_noise_db: float, gain_db: float) -> np.ndarray:
+    """What the microphone adds to the sound field ``x``: pink background noise and white
+    self-noise, ``snr_db`` and ``self_noise_db`` below the direct sound, then its sensitivity and
+    the recording gain."""
+    level = direct_amp * np.sqrt(np.mean(np.asarray(sound, dtype=np.float64) ** 2))
+    n = x.shape[-1]
+    pink = np.stack([colored_noise(n, 1.0, rng) for _ in range(int(np.prod(x.shape[:-1])))]).reshape(x.shape)
+    white = rng.standard_normal(x.shape)
+    x = x + level * (10 ** (-snr_db / 20) * pink + 10 ** (-self_noise_db / 20) * white)
+    return (x * MIC_SENSITIVITY * 10 ** (gain_db / 20)).astype(np.float32)
 
 
 def record_pulse(ir: np.ndarray, sound: np.ndarray, direct_amp: float, rng: np.random.Generator,
@@ -268,9 +274,7 @@ def record_pulse(ir: np.ndarray, sound: np.ndarray, direct_amp: float, rng: np.r
     if sound.ndim != 1 or sound.size > n:
         raise VrechoError(f"sound: must be 1-D and at most {n} samples, got shape {sound.shape}")
     x = np.fft.irfft(np.fft.rfft(ir, n) * np.fft.rfft(sound, n), n)
-    level = direct_amp * np.sqrt(np.mean(sound ** 2))
-    x += _noise(x.shape, level, snr_db, self_noise_db, rng)
-    return (x * MIC_SENSITIVITY * 10 ** (gain_db / 20)).astype(np.float32)
+    return _microphone(x, sound, direct_amp, rng, snr_db, self_noise_db, gain_db)
 
 
 def record_source(ir: np.ndarray, sound: np.ndarray, onset_s: float, direct_amp: float,
@@ -289,9 +293,7 @@ def record_source(ir: np.ndarray, sound: np.ndarray, onset_s: float, direct_amp:
     excitation[start:start + k] = sound[:k]
     m = 2 * n
     x = np.fft.irfft(np.fft.rfft(ir, m) * np.fft.rfft(excitation, m), m)[..., :n]
-    level = direct_amp * np.sqrt(np.mean(np.asarray(sound, dtype=float) ** 2))
-    x += _noise(x.shape, level, snr_db, self_noise_db, rng)
-    return (x * MIC_SENSITIVITY * 10 ** (gain_db / 20)).astype(np.float32)
+    return _microphone(x, sound, direct_amp, rng, snr_db, self_noise_db, gain_db)
 
 
 def echo_delay_s(scene: Scene, pose: DevicePose, index: int | None = None) -> float:

@@ -97,10 +97,11 @@ def _scene_rows(out: Path, index: int, preset_name: str, seed: int, split: str, 
     irs = np.zeros((n_irs, FS), np.float32)
     rows = []
     base = index * _block(preset)
+    crops = [crop(world, pose) for pose in scene.poses]  # source frames reuse their pose's crop
     for k in range(n_irs):
         is_echo = k < preset.n_poses
         pose = scene.poses[k % preset.n_poses]
-        image = crop(world, pose)
+        image = crops[k % preset.n_poses]
         if is_echo:
             ir = device_impulse_response(scene, pose, cache=cache)[0]
             disc = scene.discontinuities[pose.target]

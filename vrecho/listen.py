@@ -33,6 +33,7 @@ class Observation:
     echo_level_db: float  # measured: echo peak at that delay relative to the direct sound
     frame: np.ndarray  # the probe's 1 s frame
     response: np.ndarray  # impulse response estimated from it (first 30 ms)
+    ir: np.ndarray  # the simulated impulse response behind the frame
 
 
 def listen(scene: Scene, rng: np.random.Generator | None = None, progress: bool = True) -> list[Observation]:
@@ -54,7 +55,7 @@ def listen(scene: Scene, rng: np.random.Generator | None = None, progress: bool 
         echo = np.max(np.abs(h[centre - half:centre + half + 1]))
         d = scene.discontinuities[pose.target]
         out.append(Observation(i, pose.target, d.kind, scene.depth_m(pose), scene.incidence_deg(pose), 1e3 * delay,
-                               float(20 * np.log10(echo / np.abs(h[direct]))), frame, h))
+                               float(20 * np.log10(echo / np.abs(h[direct]))), frame, h, ir))
     return out
 
 
@@ -88,8 +89,7 @@ def figure(scene: Scene, observations: list[Observation], path: Path) -> Path:
     rng = np.random.default_rng(1)
     for col, o in enumerate(first.values()):
         pose = scene.poses[o.pose]
-        ir = device_impulse_response(scene, pose)[0]
-        clap = record_pulse(ir, emitted_sound("clap", FS, rng), device_direct_amplitude(scene, pose), rng)
+        clap = record_pulse(o.ir, emitted_sound("clap", FS, rng), device_direct_amplitude(scene, pose), rng)
         axes[0, col].imshow(logmel(clap), origin="lower", aspect="auto", cmap="magma")
         axes[0, col].set_title(f"{o.kind}, {o.depth_m:.2f} m\nclap log-mel (62 x 25)", fontsize=9)
         axes[0, col].set_xlabel("time bin (40 ms)")
