@@ -4,12 +4,29 @@ A phone or headset emits short pulses while it films; the echoes tell whether a 
 is an opening, a pane of glass or a mirror, and how far away it is. Modules, one idea each:
 ``scene`` (rooms, surfaces, the device; JSON), ``signals`` (the 16 emitted sounds, the probe),
 ``acoustics`` (pyroomacoustics impulse responses and recordings), ``render`` (the ray-cast camera),
-``features`` (log-mel and echo features), ``data`` (datasets), ``listen`` (what the device hears),
-``cli`` (the ``vrecho`` command).
+``features`` (log-mel and echo features), ``data`` (datasets), ``models`` (EchoCNN and baselines),
+``train`` (targets, losses, the training loop), ``evaluate`` (the benchmark harness and tables),
+``classifier`` (``load_classifier``: shipped weights, ``predict``), ``listen`` (what the device
+hears), ``cli`` (the ``vrecho`` command).
 """
 
 from .errors import VrechoError
 from .scene import Scene, builtin_scene, load_scene, random_scene
 
-__all__ = ["VrechoError", "Scene", "builtin_scene", "load_scene", "random_scene"]
+__all__ = ["Classifier", "Prediction", "load_classifier", "VrechoError", "Scene", "builtin_scene", "load_scene", "random_scene"]
 __version__ = "0.1.0"
+
+
+def load_classifier(path=None):
+    """EchoCNN with the weights shipped in the package (or ``path``); see :mod:`vrecho.classifier`."""
+    from .classifier import load_classifier as load
+
+    return load(path)
+
+
+def __getattr__(name):  # torch loads only when the classifier is asked for
+    if name in ("Classifier", "Prediction"):
+        from . import classifier
+
+        return getattr(classifier, name)
+    raise AttributeError(f"module 'vrecho' has no attribute {name!r}")

@@ -26,6 +26,29 @@ def _generate(args) -> int:
     return 0
 
 
+def _train(args) -> int:
+    from .evaluate import train_methods
+
+    records = train_methods(args.data, args.out, args.method, args.seed, args.epochs, args.patience,
+                            progress=not args.quiet)
+    for name, r in records.items():
+        extra = f", {r['epochs']} epochs (best {r['best_epoch'] + 1})" if "epochs" in r else ""
+        print(f"{name:18s} {r['protocol']:7s} {r['n_train']:6d} train frames, {r['seconds']:7.1f} s{extra}")
+    if (args.out / "classifier.pt").exists():
+        print(f"classifier: {args.out / 'classifier.pt'} (vrecho.load_classifier(path) loads it)")
+    return 0
+
+
+def _evaluate(args) -> int:
+    from .evaluate import evaluate
+
+    evaluate(args.data, args.run, args.out, args.seed, progress=not args.quiet, methods=args.method)
+    print((args.out / "tables.md").read_text())
+    print(f"written to {args.out}: tables.md, results.csv, metrics.json, confusion_*.png, "
+          "activation_maximisation_depth.png")
+    return 0
+
+
 def _demo(args) -> int:
     from .listen import run_demo
 
@@ -48,6 +71,31 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--quiet", action="store_true", help="no progress bar")
     g.set_defaults(func=_generate)
 
+    t = sub.add_parser("train", help="train EchoCNN and every baseline on a dataset",
+                       description="Train every method of the benchmark (EchoCNN variants and baselines) on a dataset "
+                                   "made by `vrecho generate`, with early stopping on the validation rooms. Resumable: "
+                                   "rerun to continue from the last finished epoch. Writes OUT/classifier.pt.")
+    t.add_argument("--data", required=True, type=Path, help="dataset folder")
+    t.add_argument("--out", required=True, type=Path, help="run folder for checkpoints and models")
+    t.add_argument("--method", action="append", default=None, help="train only this method (repeatable; default: all)")
+    t.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    t.add_argument("--epochs", type=int, default=40, help="most epochs per model (default: 40)")
+    t.add_argument("--patience", type=int, default=6, help="epochs without improvement before stopping (default: 6)")
+    t.add_argument("--quiet", action="store_true", help="no progress bars")
+    t.set_defaults(func=_train)
+
+    e = sub.add_parser("evaluate", help="the paper's tables for every trained method",
+                       description="Judge every method trained in RUN on the test rooms: the paper's two tables "
+                                   "(1/2/3 ft and 0.5 m depth classes) for both protocols, a per-sound breakdown, "
+                                   "confusion matrices and the activation-maximisation figure.")
+    e.add_argument("--data", required=True, type=Path, help="dataset folder")
+    e.add_argument("--run", required=True, type=Path, help="run folder written by `vrecho train`")
+    e.add_argument("--out", type=Path, default=None, help="output folder (default: RUN/evaluation)")
+    e.add_argument("--method", action="append", default=None, help="evaluate only this method (repeatable)")
+    e.add_argument("--seed", type=int, default=0, help="seed of the product protocol's probes (default: 0)")
+    e.add_argument("--quiet", action="store_true", help="no progress bars")
+    e.set_defaults(func=_evaluate)
+
     d = sub.add_parser("demo", help="run vrecho on its built-in living room",
                        description="Simulate the built-in scene (or --scene FILE): what the device hears in "
                                    "front of each surface, against the truth; writes recordings and figures.")
@@ -60,6 +108,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if getattr(args, "run", None) is not None and getattr(args, "out", "unset") is None:
+        args.out = args.run / "evaluation"
     try:
         return args.func(args)
     except VrechoError as e:

@@ -289,9 +289,59 @@ class Dataset:
             m &= self.labels["heard"] == int(heard)
         return m
 
-    def paper_split(self, split: str) -> np.ndarray:
+    def paper_split(self, split: str, kind: str = "echo") -> np.ndarray:
         """PROTOCOL.md's benchmark: train sounds in train/val rooms, held-out sounds in test rooms."""
-        return self.mask(split, "echo", heard=split != "test")
+        return self.mask(split, kind, heard=split != "test")
+
+    def probe_frames(self, split: str, probes: tuple[str, ...], seed: int = 0, progress: bool = False):
+        """The product protocol's frames: each echo impulse response of a split heard with known
+        probes, rendered now from the stored responses (noise, self-noise and gain drawn as in
+        :func:`generate`).
+
+        Parameters
+        ----------
+        split : {"train", "val", "test"}
+        probes : tuple of {"vrecho", "random"}
+            One frame per impulse response and entry: vrecho's own probe, or a random broadband
+            probe (:func:`vrecho.signals.random_probe`).
+        seed : int
+
+        Returns
+        -------
+        audio : numpy.ndarray, shape (N, 44100), float32
+        emitted : numpy.ndarray, shape (N, 4410), float32
+        rows : numpy.ndarray, shape (N,)
+            For each frame, a stored frame of the same impulse response (its labels and image).
+        probe_kind : numpy.ndarray of str, shape (N,)
+        """
+        from tqdm import tqdm
+
+        from .acoustics import device_direct_amplitude, record_pulse
+        from .signals import probe, random_probe
+
+        if not set(probes) <= {"vrecho", "random"}:
+            raise VrechoError(f"probes: expected 'vrecho' or 'random' entries, got {probes!r}")
+        L = self.labels
+        m = self.mask(split, "echo")
+        irs, first = np.unique(L["ir"][m], return_index=True)
+        rows = np.where(m)[0][first]
+        rng = np.random.default_rng([seed, 4099, ["train", "val", "test"].index(split)])
+        own = probe()
+        audio, emitted, out_rows, kinds = [], [], [], []
+        scenes = {}
+        for ir_index, row in tqdm(list(zip(irs, rows)), desc=f"probe frames ({split})", unit="ir", disable=not progress):
+            ir = np.asarray(self.ir[int(ir_index)], dtype=np.float32)
+            scene_index = int(L["scene"][row])
+            scene = scenes.setdefault(scene_index, self.scene(scene_index))
+            amp = device_direct_amplitude(scene, scene.poses[int(L["pose"][row])])
+            for kind in probes:
+                sound = own if kind == "vrecho" else random_probe(rng)
+                audio.append(record_pulse(ir, sound, amp, rng, rng.uniform(20, 40), rng.uniform(55, 70), rng.uniform(-6, 0)))
+                emitted.append(sound)
+                out_rows.append(row)
+                kinds.append(kind)
+        return (np.asarray(audio, np.float32), np.asarray(emitted, np.float32), np.asarray(out_rows),
+                np.asarray(kinds, dtype=str))
 
     def emitted(self, frame: int) -> np.ndarray:
         """The exact sound emitted for a frame (regenerated from its seed)."""

@@ -1,7 +1,8 @@
 """What the device hears in front of each surface of a scene: simulated frames with vrecho's
 probe, the echo read back from them by deconvolution, and the truth beside it.
 
-This is what ``vrecho demo`` runs until the full pipeline (EchoCNN, repair, export) lands.
+This is what ``vrecho demo`` runs until the full pipeline (repair, export, walkthrough) lands;
+EchoCNN's answers (the shipped weights) stand beside the truth.
 """
 
 from __future__ import annotations
@@ -59,13 +60,23 @@ def listen(scene: Scene, rng: np.random.Generator | None = None, progress: bool 
     return out
 
 
-def table(observations: list[Observation]) -> str:
-    """The observations as a Markdown table."""
-    lines = ["| pose | surface | kind | depth (m) | incidence (deg) | echo delay (ms) | echo level (dB re direct) |",
-             "|---:|---:|:---|---:|---:|---:|---:|"]
-    for o in observations:
-        lines.append(f"| {o.pose} | {o.surface} | {o.kind} | {o.depth_m:.2f} | {o.incidence_deg:.1f} | "
-                     f"{o.echo_delay_ms:.2f} | {o.echo_level_db:.1f} |")
+def table(observations: list[Observation], predictions=None) -> str:
+    """The observations as a Markdown table, with EchoCNN's answers beside the truth when given
+    (one :class:`vrecho.classifier.Prediction` per observation)."""
+    head = "| pose | surface | kind | depth (m) | incidence (deg) | echo delay (ms) | echo level (dB re direct) |"
+    rule = "|---:|---:|:---|---:|---:|---:|---:|"
+    if predictions is not None:
+        head += " EchoCNN says (open/closed confidence) | EchoCNN depth (m) |"
+        rule += ":---|---:|"
+    lines = [head, rule]
+    for i, o in enumerate(observations):
+        line = (f"| {o.pose} | {o.surface} | {o.kind} | {o.depth_m:.2f} | {o.incidence_deg:.1f} | "
+                f"{o.echo_delay_ms:.2f} | {o.echo_level_db:.1f} |")
+        if predictions is not None:
+            p = predictions[i]
+            said = "open" if p.is_open else p.material
+            line += f" {said} ({100 * p.confidence:.0f}%) | {p.depth_m:.2f} |"
+        lines.append(line)
     return "\n".join(lines)
 
 
@@ -120,9 +131,12 @@ def run_demo(out: str | Path, scene_path: str | Path | None = None, quiet: bool 
     scene = builtin_scene() if scene_path is None else load_scene(scene_path)
     out = ensure_writable_dir(out)
     observations = listen(scene, progress=not quiet)
+    from .classifier import load_classifier
+
+    predictions = load_classifier().predict_batch(np.stack([o.frame for o in observations]), FS, emitted=probe())
     print(f"scene {scene.name!r}: {len(scene.discontinuities)} discontinuities, {len(scene.poses)} poses, "
-          f"{len(scene.sources)} sound sources")
-    print(table(observations))
+          f"{len(scene.sources)} sound sources; EchoCNN-E (shipped weights) hears vrecho's probe")
+    print(table(observations, predictions))
     rec = ensure_writable_dir(out / "recordings")
     for o in observations:
         sf.write(rec / f"pose_{o.pose:02d}_{o.kind}.wav", o.frame, FS, subtype="FLOAT")

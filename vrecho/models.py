@@ -20,8 +20,16 @@ DEPTH_BINS_M = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
 """Synthetic-table depth classes: centres 0.5 m apart, each +/- 0.25 m."""
 DEPTH_FT_M = (0.3048, 0.6096, 0.9144)
 """Real-scene-table depth classes: 1, 2 and 3 ft."""
-HEADS = {"open": 2, "material": 2, "depth_bin": len(DEPTH_BINS_M), "depth_ft": len(DEPTH_FT_M), "depth_m": 1}
-"""Output size of each head: open/closed, glass/mirror, the two depth classings, depth in metres."""
+SRC_GRID_M = ((-6.0, 6.0), (-6.0, 6.0), (-3.0, 3.0))
+"""Extent of the source-position grid in the device frame (forward, left, up), in metres."""
+SRC_CELL_M = 0.5
+SRC_CELLS = tuple(int(round((hi - lo) / SRC_CELL_M)) for lo, hi in SRC_GRID_M)
+"""Cells per axis of the 0.5 m source grid (24, 24, 12)."""
+HEADS = {"open": 2, "material": 2, "depth_bin": len(DEPTH_BINS_M), "depth_ft": len(DEPTH_FT_M), "depth_m": 1,
+         "src_cell": sum(SRC_CELLS), "src_m": 3}
+"""Output size of each head: open/closed, glass/mirror, the two depth classings, depth in metres,
+the source's 0.5 m grid cell (one softmax per axis, concatenated) and its position in metres."""
+CLASS_HEADS = ("open", "material", "depth_bin", "depth_ft")
 
 
 class AudioBranch(nn.Module):
@@ -57,33 +65,93 @@ class ImageBranch(nn.Module):
         return F.relu(self.fc(torch.flatten(x, 1)))
 
 
-class EchoBranch(nn.Module):
-    """The recovered impulse response: a 1-D CNN over its first 30 ms (log envelope, sample
-    resolution kept in the first layers so echo delays stay readable), and a dense layer over the
-    octave-band energy decay (7 x 20)."""
+SPEED_OF_SOUND = 343.0
+MIC_OFFSET_M = 0.07
+ECHO_FS = 44100
 
-    def __init__(self, hidden: int = 128, length: int = 1323):
+
+class EchoBranch(nn.Module):
+    """The recovered impulse response, read the way physics says: where is the echo?
+
+    Over the log envelope of the first 30 ms (half sample rate after a strided convolution,
+    0.4 cm of depth per step) a stack of dilated residual convolutions scores every delay;
+    a softmax over the delays of the range of interest (past the direct sound) is an attention
+    trained to point at the true echo delay; its peak, refined by a soft-argmax over the
+    neighbouring steps and mapped through the echo geometry (emitter, surface, microphone 7 cm
+    above the emitter), is the depth. What it reads there and the octave-band energy decay
+    (7 x 20) feed the shared layers. The depth thus comes from an echo delay, not from memorised
+    spectra, and carries over to rooms and probes never seen.
+    """
+
+    REFINE_STEPS = 3
+
+    def __init__(self, hidden: int = 128, length: int = 1323, channels: int = 24,
+                 dilations: tuple[int, ...] = (1, 2, 4, 8, 16, 32)):
         super().__init__()
-        self.convs = nn.ModuleList()
-        self.norms = nn.ModuleList()
-        channels = (1, 16, 32, 32, 64)
-        for c_in, c_out in zip(channels[:-1], channels[1:]):
-            self.convs.append(nn.Conv1d(c_in, c_out, 7, padding=3))
-            self.norms.append(nn.BatchNorm1d(c_out))
-        n = length
-        for _ in self.convs:
-            n //= 2
-        self.fc_env = nn.Linear(channels[-1] * n, hidden)
+        self.stem = nn.Conv1d(1, channels, 8, stride=2, padding=3)
+        self.convs = nn.ModuleList(nn.Conv1d(channels, channels, 5, padding=2 * d, dilation=d) for d in dilations)
+        self.norms = nn.ModuleList(nn.BatchNorm1d(channels) for _ in dilations)
+        self.score = nn.Conv1d(channels, 1, 1)
+        # Scores start as the envelope itself, sharpened: the attention begins as peak picking
+        # (the strongest echo past the direct sound) and learns what to discount.
+        self.sharpness = nn.Parameter(torch.tensor(40.0))
+        t = (torch.arange(length // 2) * 2 + 0.5) / ECHO_FS  # delay at each step's centre
+        path = SPEED_OF_SOUND * t  # emitter -> surface -> microphone
+        self.register_buffer("depth_at", torch.sqrt(torch.clamp(path ** 2 - MIC_OFFSET_M ** 2, min=0)) / 2)
+        self.register_buffer("valid", self.depth_at >= 0.15)
         self.fc_bands = nn.Linear(7 * 20, hidden // 2)
+        self.fc = nn.Linear(3 * channels + 2, hidden)
         self.out_features = hidden + hidden // 2
 
-    def forward(self, envelope: torch.Tensor, bands: torch.Tensor) -> torch.Tensor:
+    def forward(self, envelope: torch.Tensor, bands: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         x = torch.log10(envelope.clamp_min(1e-4))[:, None] / 4.0  # 80 dB of range to [-1, 0]
+        h = F.relu(self.stem(x))
         for conv, norm in zip(self.convs, self.norms):
-            x = F.max_pool1d(F.relu(norm(conv(x))), 2)
-        e = F.relu(self.fc_env(torch.flatten(x, 1)))
+            h = h + F.relu(norm(conv(h)))
+        n = self.depth_at.shape[0]
+        h = h[..., :n]
+        level_at = F.max_pool1d(x, 2)[:, 0, :n]
+        scores = (self.score(h)[:, 0] + self.sharpness * level_at).masked_fill(~self.valid, -1e4)
+        # The echo: the best-scoring delay, refined to a fraction of a step by a soft-argmax over
+        # its neighbourhood (a global expectation would average in the floor's echo).
+        peak = scores.argmax(1, keepdim=True)
+        near = (torch.arange(n, device=scores.device)[None] - peak).abs() <= self.REFINE_STEPS
+        w = torch.softmax(scores.masked_fill(~near, -1e4), dim=1)
+        depth = (w * self.depth_at).sum(1)
+        level = (w * level_at).sum(1, keepdim=True)
+        self.delay_scores = scores  # trained against the true echo delay (see train.loss_fn)
+        z = torch.cat([(w[:, None] * h).sum(2), h.amax(2), h.mean(2), level, depth[:, None]], dim=1)
+        e = F.relu(self.fc(z))
         b = F.relu(self.fc_bands(torch.flatten(bands, 1) / 60.0))
-        return torch.cat([e, b], dim=1)
+        return torch.cat([e, b], dim=1), depth
+
+
+class SoundNetBranch(nn.Module):
+    """A SoundNet-style 1-D CNN over the raw waveform (11.025 kHz, 1 s): strided convolutions with
+    SoundNet's kernel sizes (64, 32, 16, 8, 4, ...), max-pooling by 8 after the first two, then
+    global average and max pooling. ``n_layers`` is 5 or 8; trained from scratch (SoundNet's
+    pretrained weights cannot be had offline). A quarter of the sample rate keeps training within
+    minutes per epoch on two cores; the global pooling discards echo timing anyway."""
+
+    def __init__(self, n_layers: int = 8, hidden: int = 128):
+        super().__init__()
+        if n_layers not in (5, 8):
+            raise ValueError(f"n_layers: expected 5 or 8, got {n_layers!r}")
+        kernels = (64, 32, 16, 8, 4, 4, 4, 4)[:n_layers]
+        channels = (1, 16, 32, 64, 128, 256, 256, 256, 256)[:n_layers + 1]
+        self.convs = nn.ModuleList(nn.Conv1d(a, b, k, stride=2, padding=k // 2)
+                                   for a, b, k in zip(channels[:-1], channels[1:], kernels))
+        self.norms = nn.ModuleList(nn.BatchNorm1d(b) for b in channels[1:])
+        self.fc = nn.Linear(2 * channels[-1], hidden)
+        self.out_features = hidden
+
+    def forward(self, wave: torch.Tensor) -> torch.Tensor:  # (B, 11025)
+        x = wave[:, None] / wave.abs().amax(dim=1, keepdim=True)[:, None].clamp_min(1e-6)
+        for i, (conv, norm) in enumerate(zip(self.convs, self.norms)):
+            x = F.relu(norm(conv(x)))
+            if i < 2:
+                x = F.max_pool1d(x, 8)
+        return F.relu(self.fc(torch.cat([x.mean(2), x.amax(2)], dim=1)))
 
 
 class MFB(nn.Module):
@@ -103,33 +171,44 @@ class MFB(nn.Module):
         return F.normalize(z, dim=1)
 
 
+INPUTS = ("mel", "image", "echo", "wave")
+
+
 class EchoCNN(nn.Module):
     """EchoCNN with the inputs of its variant and every head of :data:`HEADS`.
 
     Parameters
     ----------
-    inputs : tuple of {"mel", "image", "echo"}
+    inputs : tuple of {"mel", "image", "echo", "wave"}
         ``("mel",)``: EchoCNN-A; ``("mel", "image")``: EchoCNN-AV; ``("echo",)``: EchoCNN-E
-        (emitted sound known); ``("image",)``: the visual-only baseline.
+        (emitted sound known); ``("image",)``: the visual-only baseline; ``("wave",)``: the
+        SoundNet-style baseline.
     fusion : {"concat", "mfb"}
         How two branches meet (ignored with one).
     hidden : int
         Width of each branch's dense layer and of the shared dense layer.
+    dropout : float
+    wave_layers : {5, 8}
+        Depth of the SoundNet branch.
     """
 
     def __init__(self, inputs: tuple[str, ...] = ("mel",), fusion: str = "concat", hidden: int = 128,
-                 dropout: float = 0.3):
+                 dropout: float = 0.3, wave_layers: int = 8):
         super().__init__()
-        if not inputs or not set(inputs) <= {"mel", "image", "echo"}:
-            raise ValueError(f"inputs: expected some of mel, image, echo; got {inputs!r}")
+        if not inputs or not set(inputs) <= set(INPUTS):
+            raise ValueError(f"inputs: expected some of {', '.join(INPUTS)}; got {inputs!r}")
         if fusion not in ("concat", "mfb"):
             raise ValueError(f"fusion: expected concat or mfb, got {fusion!r}")
         self.inputs, self.fusion = tuple(inputs), fusion
+        self.config = {"inputs": list(inputs), "fusion": fusion, "hidden": hidden, "dropout": dropout,
+                       "wave_layers": wave_layers}
         self.branches = nn.ModuleDict()
         if "mel" in inputs:
             self.branches["mel"] = AudioBranch(hidden=hidden)
         if "echo" in inputs:
             self.branches["echo"] = EchoBranch(hidden=hidden)
+        if "wave" in inputs:
+            self.branches["wave"] = SoundNetBranch(wave_layers, hidden=hidden)
         if "image" in inputs:
             self.branches["image"] = ImageBranch(hidden=hidden)
         sizes = [b.out_features for b in self.branches.values()]
@@ -141,12 +220,15 @@ class EchoCNN(nn.Module):
         self.shared = nn.Linear(fused, hidden)
         self.dropout = nn.Dropout(dropout)
         self.heads = nn.ModuleDict({name: nn.Linear(hidden, size) for name, size in HEADS.items()})
+        self.register_buffer("depth_bins", torch.tensor(DEPTH_BINS_M), persistent=False)
+        self.register_buffer("depth_ft", torch.tensor(DEPTH_FT_M), persistent=False)
 
     def forward(self, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-        feats = []
+        feats, echo_depth = [], None
         for name, branch in self.branches.items():
             if name == "echo":
-                feats.append(branch(batch["envelope"], batch["bands"]))
+                f, echo_depth = branch(batch["envelope"], batch["bands"])
+                feats.append(f)
             else:
                 feats.append(branch(batch[name]))
         if hasattr(self, "mfb"):
@@ -156,7 +238,21 @@ class EchoCNN(nn.Module):
         h = self.dropout(F.relu(self.shared(self.dropout(z))))
         out = {name: head(h) for name, head in self.heads.items()}
         out["depth_m"] = out["depth_m"].squeeze(1)
+        if echo_depth is not None:  # the echo delay read by the echo branch, refined by a small correction
+            out["depth_m"] = echo_depth + 0.05 * torch.tanh(out["depth_m"])
+            # Depth classes are the classes of that measured depth (nearest centre), not a guess of
+            # their own: for an echo read to a centimetre a separate classifier only adds errors.
+            for head, centres in (("depth_bin", self.depth_bins), ("depth_ft", self.depth_ft)):
+                out[head] = -(out["depth_m"][:, None] - centres[None]).abs() / 0.1
+            out["delay_scores"] = self.branches["echo"].delay_scores
+            out["depth_at"] = self.branches["echo"].depth_at
         return out
+
+
+def build(config: dict) -> EchoCNN:
+    """An EchoCNN from its ``config`` (as stored in checkpoints)."""
+    return EchoCNN(tuple(config["inputs"]), config["fusion"], config["hidden"], config["dropout"],
+                   config.get("wave_layers", 8))
 
 
 class FeatureBaseline:
@@ -187,46 +283,69 @@ class FeatureBaseline:
 
         return np.concatenate([np.asarray(x[k], dtype=np.float32).reshape(len(x[k]), -1) for k in self.inputs], axis=1)
 
+    def _estimator(self, regression: bool):
+        from sklearn.multioutput import MultiOutputRegressor
+        from sklearn.neighbors import KNeighborsClassifier, KNeighborsRegressor
+        from sklearn.svm import LinearSVC, LinearSVR
+
+        if self.kind == "knn":
+            return KNeighborsRegressor(self.n_neighbors) if regression else KNeighborsClassifier(self.n_neighbors)
+        # the primal problems (dual=False): samples outnumber features, and this is minutes faster
+        if regression:
+            return MultiOutputRegressor(LinearSVR(C=self.C, dual=False, loss="squared_epsilon_insensitive"))
+        return LinearSVC(C=self.C, dual=False)
+
     def fit(self, x: dict, y: dict) -> "FeatureBaseline":
         import numpy as np
         from sklearn.dummy import DummyClassifier
-        from sklearn.neighbors import KNeighborsClassifier, KNeighborsRegressor
         from sklearn.pipeline import make_pipeline
         from sklearn.preprocessing import StandardScaler
-        from sklearn.svm import LinearSVC, LinearSVR
 
         from .train import IGNORE
 
         X = self._features(x)
         self.models_ = {}
-        for head in HEADS:
-            t = np.asarray(y[head])
-            keep = t != IGNORE if head != "depth_m" else np.ones(len(t), bool)
-            if not keep.any():  # nothing to learn this head from: it will answer nothing
-                self.models_[head] = None
+        tasks = {head: (np.asarray(y[head]), y[head] != IGNORE) for head in CLASS_HEADS}
+        depth = np.asarray(y["depth_m"])
+        tasks["depth_m"] = (depth[:, None], np.isfinite(depth) & (np.asarray(y["open"]) == 0))
+        src = np.asarray(y["src_m"])
+        src_rows = np.isfinite(src).all(axis=1)
+        tasks["src_m"] = (src, src_rows)
+        for axis in range(3):
+            tasks[f"src_cell{axis}"] = (np.asarray(y["src_cell"])[:, axis], src_rows)
+        for name, (t, keep) in tasks.items():
+            keep = np.asarray(keep)
+            if not keep.any():  # nothing to learn this task from: it will answer nothing
+                self.models_[name] = None
                 continue
-            if head == "depth_m":
-                est = KNeighborsRegressor(self.n_neighbors) if self.kind == "knn" else LinearSVR(C=self.C, max_iter=5000)
-            elif len(np.unique(t[keep])) == 1:
+            regression = name in ("depth_m", "src_m")
+            if not regression and len(np.unique(t[keep])) == 1:
                 est = DummyClassifier(strategy="most_frequent")
             else:
-                est = KNeighborsClassifier(self.n_neighbors) if self.kind == "knn" else LinearSVC(C=self.C, max_iter=5000)
-            self.models_[head] = make_pipeline(StandardScaler(), est).fit(X[keep], t[keep])
+                est = self._estimator(regression)
+            self.models_[name] = make_pipeline(StandardScaler(), est).fit(X[keep], t[keep])
         return self
 
     def predict(self, x: dict) -> dict:
         import numpy as np
 
         X = self._features(x)
-        out = {}
-        for head, model in self.models_.items():
+        n = len(X)
+
+        def run(name, width):
+            model = self.models_[name]
             if model is None:
-                out[head] = torch.zeros((len(X),) if head == "depth_m" else (len(X), HEADS[head]))
-                continue
-            if head == "depth_m":
-                out[head] = torch.as_tensor(model.predict(X), dtype=torch.float32)
-                continue
-            scores = np.zeros((len(X), HEADS[head]), np.float32)  # one-hot of the predicted class
-            scores[np.arange(len(X)), model.predict(X).astype(int)] = 1.0
-            out[head] = torch.as_tensor(scores)
+                return np.zeros((n, width), np.float32)
+            return np.asarray(model.predict(X), np.float32).reshape(n, -1)
+
+        def one_hot(labels, width):
+            scores = np.zeros((n, width), np.float32)
+            scores[np.arange(n), labels.astype(int).ravel()] = 1.0
+            return scores
+
+        out = {head: torch.as_tensor(one_hot(run(head, 1), HEADS[head])) for head in CLASS_HEADS}
+        out["depth_m"] = torch.as_tensor(run("depth_m", 1)[:, 0])
+        out["src_m"] = torch.as_tensor(run("src_m", 3))
+        out["src_cell"] = torch.as_tensor(np.concatenate([one_hot(run(f"src_cell{a}", 1), SRC_CELLS[a]) for a in range(3)],
+                                                         axis=1))
         return out

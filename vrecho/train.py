@@ -16,31 +16,59 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
-from .models import DEPTH_BINS_M, DEPTH_FT_M, EchoCNN
+from .errors import VrechoError
+from .models import CLASS_HEADS, DEPTH_BINS_M, DEPTH_FT_M, SRC_CELL_M, SRC_CELLS, SRC_GRID_M, EchoCNN
 
 IGNORE = -100
 
 
 def targets(labels: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, torch.Tensor]:
-    """Training targets of the given echo frames (see the module's docstring)."""
-    depth = labels["depth_m"][rows]
-    is_open = labels["is_open"][rows]
-    material = np.where(is_open == 1, IGNORE, (labels["material"][rows] == "mirror").astype(int))
-    depth_bin = np.clip(np.round((depth - DEPTH_BINS_M[0]) / 0.5), 0, len(DEPTH_BINS_M) - 1).astype(int)
-    ft = np.argmin(np.abs(depth[:, None] - np.array(DEPTH_FT_M)[None]), axis=1)
-    near = np.abs(depth - np.array(DEPTH_FT_M)[ft]) <= 0.1524
+    """Training targets of the given frames (see the module's docstring); heads that do not apply
+    to a frame's kind hold IGNORE (classes) or NaN (metres)."""
+    rows = np.asarray(rows)
+    echo = labels["kind"][rows] == "echo"
+    depth = np.where(echo, labels["depth_m"][rows], np.nan)
+    is_open = np.where(echo, labels["is_open"][rows], IGNORE)
+    material = np.where(is_open == 0, (labels["material"][rows] == "mirror").astype(int), IGNORE)
+    d = np.nan_to_num(depth)
+    depth_bin = np.clip(np.round((d - DEPTH_BINS_M[0]) / 0.5), 0, len(DEPTH_BINS_M) - 1).astype(int)
+    ft = np.argmin(np.abs(d[:, None] - np.array(DEPTH_FT_M)[None]), axis=1)
+    near = echo & (np.abs(d - np.array(DEPTH_FT_M)[ft]) <= 0.1524)
+    src = np.stack([labels[c][rows] for c in ("src_x", "src_y", "src_z")], axis=1)
+    src[echo] = np.nan
+    cells = np.stack([np.clip(np.floor((np.nan_to_num(src[:, i]) - lo) / SRC_CELL_M), 0, n - 1)
+                      for i, ((lo, _), n) in enumerate(zip(SRC_GRID_M, SRC_CELLS))], axis=1).astype(int)
+    cells[echo] = IGNORE
     return {"open": torch.as_tensor(is_open, dtype=torch.long),
             "material": torch.as_tensor(material, dtype=torch.long),
-            "depth_bin": torch.as_tensor(depth_bin, dtype=torch.long),
+            "depth_bin": torch.as_tensor(np.where(echo, depth_bin, IGNORE), dtype=torch.long),
             "depth_ft": torch.as_tensor(np.where(near, ft, IGNORE), dtype=torch.long),
-            "depth_m": torch.as_tensor(depth, dtype=torch.float32)}
+            "depth_m": torch.as_tensor(depth, dtype=torch.float32),
+            "src_cell": torch.as_tensor(cells, dtype=torch.long),
+            "src_m": torch.as_tensor(src, dtype=torch.float32)}
+
+
+def _axis_logits(scores: torch.Tensor) -> list[torch.Tensor]:
+    """The source-cell head's concatenated logits, one tensor per axis."""
+    return list(torch.split(scores, SRC_CELLS, dim=1))
 
 
 def loss_fn(out: dict[str, torch.Tensor], y: dict[str, torch.Tensor], depth_weight: float = 2.0) -> torch.Tensor:
-    """Sum of the heads' losses: cross-entropy for classes (ignoring what does not apply) and a
-    smooth L1 on depth in metres."""
-    loss = F.smooth_l1_loss(out["depth_m"], y["depth_m"], beta=0.05) * depth_weight
-    for head in ("open", "material", "depth_bin", "depth_ft"):
+    """Sum of the heads' losses over the frames each applies to: cross-entropy for classes, smooth
+    L1 on depth (closed surfaces) and on source position, in metres."""
+    loss = out["open"].sum() * 0.0
+    d = torch.isfinite(y["depth_m"]) & (y["open"] == 0)  # an opening sends no echo from its plane
+    if d.any():
+        loss = loss + F.smooth_l1_loss(out["depth_m"][d], y["depth_m"][d], beta=0.05) * depth_weight
+    if "delay_scores" in out and d.any():  # the echo branch points at the true echo's delay
+        target = (out["depth_at"][None] - y["depth_m"][d, None]).abs().argmin(1)
+        loss = loss + F.cross_entropy(out["delay_scores"][d], target, label_smoothing=0.05)
+    s = torch.isfinite(y["src_m"]).all(dim=1)
+    if s.any():
+        loss = loss + F.smooth_l1_loss(out["src_m"][s], y["src_m"][s], beta=0.25)
+        for axis, logits in enumerate(_axis_logits(out["src_cell"])):
+            loss = loss + F.cross_entropy(logits[s], y["src_cell"][s, axis]) / 3
+    for head in CLASS_HEADS:
         if (y[head] != IGNORE).any():
             loss = loss + F.cross_entropy(out[head], y[head], ignore_index=IGNORE)
     return loss
@@ -58,23 +86,51 @@ def _subset(x: dict[str, torch.Tensor], idx) -> dict[str, torch.Tensor]:
     return {k: v[idx] for k, v in x.items()}
 
 
+def predict_batches(model: EchoCNN, x: dict[str, torch.Tensor], batch_size: int = 256) -> dict[str, torch.Tensor]:
+    """The model's outputs for many frames, in evaluation mode, a batch at a time."""
+    model.eval()
+    n = len(next(iter(x.values())))
+    parts = []
+    with torch.no_grad():
+        for i in range(0, n, batch_size):
+            parts.append(model(_subset(x, slice(i, i + batch_size))))
+    return {k: parts[0][k] if k == "depth_at" else torch.cat([p[k] for p in parts]) for k in parts[0]}
+
+
 def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, epochs: int = 40,
         batch_size: int = 64, lr: float = 1e-3, patience: int = 6, seed: int = 0,
-        checkpoint: str | Path | None = None, progress: bool = True) -> History:
+        checkpoint: str | Path | None = None, progress: bool = True, desc: str = "train") -> History:
     """Train with Adam, keep the weights of the best validation loss, stop after ``patience``
-    epochs without improvement. Writes the best weights to ``checkpoint`` when given."""
+    epochs without improvement.
+
+    With ``checkpoint``, the state after every epoch is written there (atomically), and a run
+    interrupted at any point resumes from its last finished epoch with the same result: each
+    epoch's shuffling and dropout are seeded by ``(seed, epoch)``. A checkpoint that stopped early
+    just loads its best weights; one that ran out of epochs goes on if given more.
+    """
     from tqdm import tqdm
 
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
     n = len(next(iter(y_train.values())))
-    best, best_state, best_epoch, since = np.inf, None, -1, 0
-    start = time.time()
-    bar = tqdm(range(epochs), desc="train", unit="epoch", disable=not progress)
-    for epoch in bar:
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    state = {"epoch": 0, "best": float("inf"), "best_epoch": -1, "since": 0, "seconds": 0.0, "stopped": False,
+             "best_state": None}
+    checkpoint = Path(checkpoint) if checkpoint is not None else None
+    if checkpoint is not None and checkpoint.exists():
+        saved = torch.load(checkpoint, weights_only=False)
+        if saved.get("config") != model.config:
+            raise VrechoError(f"checkpoint {checkpoint} holds another model ({saved.get('config')}); "
+                              "remove it or choose another folder")
+        model.load_state_dict(saved["state"])
+        opt.load_state_dict(saved["opt"])
+        state = {k: saved.get(k, v) for k, v in state.items()}
+    start = time.time() - state["seconds"]
+    done = state["stopped"] or state["epoch"] >= epochs
+    bar = tqdm(total=epochs, initial=state["epoch"], desc=desc, unit="epoch", disable=not progress or done)
+    while not state["stopped"] and state["epoch"] < epochs:
+        epoch = state["epoch"]
+        torch.manual_seed(seed * 100_003 + epoch)
+        order = np.random.default_rng([seed, epoch]).permutation(n)
         model.train()
-        order = rng.permutation(n)
         for i in range(0, n, batch_size):
             b = order[i:i + batch_size]
             if len(b) < 2:
@@ -85,31 +141,64 @@ def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, 
             opt.step()
         model.eval()
         with torch.no_grad():
-            val = float(loss_fn(model(x_val), y_val))
+            val = float(loss_fn(predict_batches(model, x_val), y_val))
         bar.set_postfix(val_loss=f"{val:.3f}")
-        if val < best - 1e-4:
-            best, best_epoch, since = val, epoch, 0
-            best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
-            if checkpoint is not None:
-                torch.save({"state": best_state, "inputs": model.inputs, "fusion": model.fusion}, checkpoint)
+        bar.update()
+        state["epoch"] = epoch + 1
+        if val < state["best"] - 1e-4:
+            state.update(best=val, best_epoch=epoch, since=0,
+                         best_state={k: v.detach().clone() for k, v in model.state_dict().items()})
         else:
-            since += 1
-            if since >= patience:
-                break
+            state["since"] += 1
+        state["stopped"] = state["since"] >= patience
+        state["seconds"] = time.time() - start
+        if checkpoint is not None:
+            _atomic_torch_save({**state, "config": model.config, "state": model.state_dict(),
+                                "opt": opt.state_dict()}, checkpoint)
     bar.close()
-    if best_state is not None:
-        model.load_state_dict(best_state)
-    return History(epoch + 1, best_epoch, best, time.time() - start)
+    if state["best_state"] is not None:
+        model.load_state_dict(state["best_state"])
+    model.eval()
+    return History(state["epoch"], state["best_epoch"], state["best"], state["seconds"])
+
+
+def _atomic_torch_save(obj, path: Path) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(obj, tmp)
+    tmp.replace(path)
+
+
+def src_cell_of(scores: torch.Tensor) -> torch.Tensor:
+    """(B, 3) grid cell chosen by the source-cell head's scores."""
+    return torch.stack([logits.argmax(1) for logits in _axis_logits(scores)], dim=1)
 
 
 def metrics(out: dict[str, torch.Tensor], y: dict[str, torch.Tensor]) -> dict[str, float]:
-    """Accuracy of each class head (on the frames it applies to) and depth errors in cm."""
+    """Accuracy of each class head on the frames it applies to, with their counts; depth errors
+    in cm, and depth-class accuracy (``*_closed``), on closed surfaces (an opening sends no echo from its own plane: its depth is reported
+    apart, as ``depth_all_*``, over every echo frame); source cell accuracy (all three axes right)
+    and position errors in metres."""
+    def accuracy(head, keep):
+        return float((out[head].argmax(1)[keep] == y[head][keep]).float().mean()) if keep.any() else float("nan")
+
     res = {}
-    for head in ("open", "material", "depth_bin", "depth_ft"):
+    for head in CLASS_HEADS:
         keep = y[head] != IGNORE
-        res[head] = float((out[head].argmax(1)[keep] == y[head][keep]).float().mean()) if keep.any() else float("nan")
-        res[f"n_{head}"] = int(keep.sum())
+        res[head], res[f"n_{head}"] = accuracy(head, keep), int(keep.sum())
+    for head in ("depth_bin", "depth_ft"):  # the depth classes of closed surfaces alone
+        res[f"{head}_closed"] = accuracy(head, (y["open"] == 0) & (y[head] != IGNORE))
     err = (out["depth_m"] - y["depth_m"]).abs()
-    res["depth_median_cm"] = 100 * float(err.median())
-    res["depth_p90_cm"] = 100 * float(err.quantile(0.9))
+    for name, keep in (("depth", (y["open"] == 0) & torch.isfinite(err)), ("depth_all", torch.isfinite(err))):
+        e = err[keep]
+        res[f"{name}_median_cm"] = 100 * float(e.median()) if len(e) else float("nan")
+        res[f"{name}_p90_cm"] = 100 * float(e.quantile(0.9)) if len(e) else float("nan")
+        res[f"n_{name}"] = int(keep.sum())
+    s = torch.isfinite(y["src_m"]).all(dim=1)
+    res["n_src"] = int(s.sum())
+    if s.any():
+        res["src_cell"] = float((src_cell_of(out["src_cell"][s]) == y["src_cell"][s]).all(dim=1).float().mean())
+        e = (out["src_m"][s] - y["src_m"][s]).norm(dim=1)
+        res["src_median_m"], res["src_p90_m"] = float(e.median()), float(e.quantile(0.9))
+    else:
+        res["src_cell"] = res["src_median_m"] = res["src_p90_m"] = float("nan")
     return res

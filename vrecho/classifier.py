@@ -1,0 +1,207 @@
+"""The classifier the rest of vrecho asks: EchoCNN with weights shipped inside the package.
+
+``load_classifier()`` loads ``vrecho/assets/echocnn.pt`` (no download, ever); ``predict`` picks
+the model for what it is given:
+
+============================  ==============================================================
+given                         model
+============================  ==============================================================
+audio                         EchoCNN-A (the paper's protocol: the emitted sound unknown)
+audio, image                  EchoCNN-AV (concatenation)
+audio, emitted                EchoCNN-E (echo features: the impulse response by deconvolution)
+audio, emitted, image         EchoCNN-EV
+============================  ==============================================================
+
+Bad input never reaches torch: a frame of the wrong length, NaN or infinite samples, a silent
+frame or a malformed image or emitted sound is a :class:`~vrecho.errors.VrechoError`; another
+sample rate is resampled; a clipped frame or an emitted sound that is not broadband is answered,
+flagged and marked low-confidence.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .errors import VrechoError
+from .features import check_frames, echo_features, logmel
+from .models import DEPTH_BINS_M, build
+from .signals import FS, check_fs
+
+CONFIDENCE_FLOOR = 0.7
+"""Below this open/closed probability an answer is marked low-confidence."""
+SILENCE_RMS = 1e-6
+CLIP_LEVEL = 0.999
+CLIP_SHARE = 1e-3
+"""A frame with at least this share of samples at full scale (|x| >= 0.999) is clipped."""
+
+
+@dataclass
+class Prediction:
+    """What EchoCNN says about the surface in front of the device.
+
+    ``is_open``, ``material`` ("glass" or "mirror": what a closed surface is), ``depth_m`` (emitter to
+    the surface's plane; meaningful for closed surfaces), ``probabilities`` (``open``, ``closed``,
+    ``glass``, ``mirror``, and ``depth_<m>`` per 0.5 m class), ``confidence`` (probability of the
+    open/closed answer), ``low_confidence``, ``flags`` (why, beyond the probability: ``clipped``,
+    ``narrowband_emitted``), ``model`` (which variant answered) and ``source_m`` (where a source
+    heard in the frame sits, forward/left/up from the device in metres, for frames of an ambient
+    source; None when the emitted sound is given: the frame is then the device's own pulse).
+    """
+
+    is_open: bool
+    material: str
+    depth_m: float
+    probabilities: dict[str, float]
+    confidence: float
+    low_confidence: bool
+    model: str
+    flags: tuple[str, ...] = field(default_factory=tuple)
+    source_m: tuple[float, float, float] | None = None
+
+
+class Classifier:
+    """EchoCNN variants behind one ``predict``; see the module's docstring."""
+
+    def __init__(self, models: dict[str, torch.nn.Module], names: dict[str, str] | None = None):
+        self.models = models
+        self.names = {**_NAMES, **(names or {})}
+        for m in models.values():
+            m.eval()
+
+    def predict(self, audio, fs: int, image=None, emitted=None) -> Prediction:
+        """One 1 s frame (1-D, starting at the pulse onset) at ``fs`` Hz; optionally the 64 x 25
+        camera crop (uint8, or float in [0, 1]) and the emitted sound (1-D, at ``fs``)."""
+        x = np.asarray(audio)
+        if x.ndim != 1:
+            raise VrechoError(f"audio: predict takes one 1-D frame, got shape {x.shape}; use predict_batch")
+        if image is not None:
+            image = np.asarray(image)[None]
+        if emitted is not None:
+            emitted = np.asarray(emitted)
+            if emitted.ndim != 1:
+                raise VrechoError(f"emitted: expected a 1-D sound, got shape {emitted.shape}")
+        return self.predict_batch(x[None], fs, image, emitted)[0]
+
+    def predict_batch(self, audio, fs: int, images=None, emitted=None) -> list[Prediction]:
+        """Many frames at once: ``audio`` (B, n); ``images`` (B, 64, 25) or None; ``emitted`` one
+        sound for all (k,) or one per frame (B, k), or None."""
+        x = check_frames(audio, fs)
+        if x.ndim == 1:
+            x = x[None]
+        fs = check_fs(fs)
+        rms = np.sqrt(np.mean(x.astype(np.float64) ** 2, axis=1))
+        if np.any(rms < SILENCE_RMS):
+            raise VrechoError(f"audio: frame {int(np.argmax(rms < SILENCE_RMS))} is silent (RMS below {SILENCE_RMS:g}): "
+                              "is the microphone on?")
+        peak = np.abs(x).max(axis=1, keepdims=True)
+        clipped = np.mean(np.abs(x) >= CLIP_LEVEL * np.maximum(peak, 1.0), axis=1) >= CLIP_SHARE
+        batch, key, narrow = {}, "A", np.zeros(len(x), bool)
+        if emitted is not None:
+            s = _check_emitted(emitted, len(x), fs)
+            f = echo_features(x, s, FS)
+            batch["envelope"], batch["bands"] = torch.as_tensor(f.envelope), torch.as_tensor(f.bands)
+            narrow = np.broadcast_to(_narrowband(s), (len(x),))
+            key = "E"
+        if images is not None:
+            batch["image"] = torch.as_tensor(_check_images(images, len(x)))
+            key += "V"
+        model = self.models[key]
+        if "mel" in model.inputs:
+            batch["mel"] = torch.as_tensor(logmel(x, FS))
+        with torch.no_grad():
+            out = model(batch)
+        p_open = torch.softmax(out["open"], 1)[:, 1].numpy()
+        p_mirror = torch.softmax(out["material"], 1)[:, 1].numpy()
+        p_depth = torch.softmax(out["depth_bin"], 1).numpy()
+        preds = []
+        for i in range(len(x)):
+            conf = float(max(p_open[i], 1 - p_open[i]))
+            flags = tuple(name for name, on in (("clipped", clipped[i]), ("narrowband_emitted", narrow[i])) if on)
+            probs = {"open": float(p_open[i]), "closed": float(1 - p_open[i]), "glass": float(1 - p_mirror[i]),
+                     "mirror": float(p_mirror[i])}
+            probs.update({f"depth_{d:g}": float(p) for d, p in zip(DEPTH_BINS_M, p_depth[i])})
+            preds.append(Prediction(is_open=bool(p_open[i] > 0.5), material="mirror" if p_mirror[i] > 0.5 else "glass",
+                                    depth_m=float(out["depth_m"][i]), probabilities=probs, confidence=conf,
+                                    low_confidence=conf < CONFIDENCE_FLOOR or bool(flags), model=self.names[key],
+                                    flags=flags,
+                                    source_m=None if emitted is not None else tuple(float(v) for v in out["src_m"][i])))
+        return preds
+
+
+_NAMES = {"A": "EchoCNN-A", "AV": "EchoCNN-AV", "E": "EchoCNN-E", "EV": "EchoCNN-EV"}
+
+
+def _check_images(images, n: int) -> np.ndarray:
+    a = np.asarray(images)
+    if a.shape != (n, 64, 25):
+        raise VrechoError(f"image: expected a 64 x 25 grayscale crop (64 rows, 25 columns), got shape {a.shape[1:]}")
+    if a.dtype == np.uint8:
+        return a.astype(np.float32) / 255
+    if a.dtype.kind != "f" or not np.all(np.isfinite(a)) or a.min() < 0 or a.max() > 1:
+        raise VrechoError("image: expected uint8, or finite floats in [0, 1]")
+    return a.astype(np.float32)
+
+
+def _check_emitted(emitted, n: int, fs: int) -> np.ndarray:
+    """The emitted sound(s) at 44.1 kHz: (k,) for one sound for all frames, or (n, k)."""
+    s = np.asarray(emitted)
+    if s.dtype.kind not in "fiu" or s.ndim not in (1, 2) or (s.ndim == 2 and len(s) != n):
+        raise VrechoError(f"emitted: expected one sound (k,) or one per frame ({n}, k), got shape {s.shape}")
+    s = s.astype(np.float32)
+    if not np.all(np.isfinite(s)):
+        raise VrechoError("emitted: contains NaN or infinite samples")
+    if s.shape[-1] > fs:
+        raise VrechoError(f"emitted: longer than a 1 s frame ({s.shape[-1]} samples at {fs} Hz)")
+    if np.any(np.abs(s).max(axis=-1) == 0):
+        raise VrechoError("emitted: the emitted sound is silent")
+    if fs != FS:
+        import librosa
+
+        s = librosa.resample(s, orig_sr=fs, target_sr=FS, res_type="soxr_hq", axis=-1).astype(np.float32)
+    return s
+
+
+def _narrowband(s: np.ndarray) -> np.ndarray:
+    """True where an emitted sound leaves part of 200 Hz to 16 kHz more than 40 dB below its
+    strongest octave: the echo features then hold too little timing information."""
+    spec = np.abs(np.fft.rfft(s, axis=-1)) ** 2
+    f = np.fft.rfftfreq(s.shape[-1], 1 / FS)
+    edges = 200 * 2.0 ** np.arange(0, 7)  # 200 Hz ... 12.8 kHz octaves, the last up to 16 kHz
+    bands = np.stack([spec[..., (f >= lo) & (f < min(2 * lo, 16000))].mean(axis=-1) for lo in edges], axis=-1)
+    db = 10 * np.log10(np.maximum(bands, 1e-30) / bands.max(axis=-1, keepdims=True))
+    return db.min(axis=-1) < -40
+
+
+def load_classifier(path: str | Path | None = None) -> Classifier:
+    """EchoCNN with the weights shipped in the package, or those of ``path`` (a ``classifier.pt``
+    written by ``vrecho train``)."""
+    if path is None:
+        with resources.as_file(resources.files("vrecho.assets") / "echocnn.pt") as p:
+            return _load(p)
+    path = Path(path)
+    if not path.is_file():
+        raise VrechoError(f"classifier: no such file {path}")
+    return _load(path)
+
+
+def _load(path: Path) -> Classifier:
+    try:
+        saved = torch.load(path, weights_only=True)
+    except Exception as e:  # a foreign or damaged file: say which
+        raise VrechoError(f"classifier: {path} is not a vrecho classifier ({type(e).__name__})") from None
+    if not isinstance(saved, dict) or saved.get("format") != "vrecho-classifier":
+        raise VrechoError(f"classifier: {path} is not a vrecho classifier")
+    models, names = {}, {}
+    for key, entry in saved["models"].items():
+        names[key] = entry.get("name", _NAMES.get(key, key))
+        model = build(entry["config"])
+        model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in entry["state"].items()})
+        models[key] = model
+    if set(models) != set(_NAMES):
+        raise VrechoError(f"classifier: {path} lacks models {sorted(set(_NAMES) - set(models))}")
+    return Classifier(models, names)
