@@ -173,3 +173,7 @@ def test_commands_refuse_bad_input(tiny_dataset, tmp_path):
     assert r.returncode == 2 and "not a vrecho dataset" in r.stderr
     r = run_cli("train", "--data", tiny_dataset, "--out", tmp_path / "run", "--method", "radar", "--quiet")
     assert r.returncode == 2 and "method" in r.stderr
+    r = run_cli("train", "--data", tiny_dataset, "--out", tmp_path / "run", "--method", "kNN", "--quiet")
+    assert r.returncode == 0, r.stderr
+    r = run_cli("train", "--data", tiny_dataset, "--out", tmp_path / "run", "--method", "kNN", "--seed", "1", "--quiet")
+    assert r.returncode == 2 and "another dataset or seed" in r.stderr

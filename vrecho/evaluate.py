@@ -175,14 +175,25 @@ def train_methods(data, out, methods=None, seed: int = 0, epochs: int = 40, pati
     :data:`SHIPPED` are all trained, writes ``classifier.pt`` (the classifier's weights).
     """
     out = ensure_writable_dir(out)
-    (out / "models").mkdir(exist_ok=True)
     chosen = [method(m) for m in methods] if methods else list(METHODS)
     harness = Harness(data, seed, progress)
+    m = harness.ds.manifest
+    identity = {"format": "vrecho-run", "dataset": {k: m[k] for k in ("preset", "seed", "n_frames")}, "seed": seed}
+    run_path = out / "run.json"
+    if run_path.exists():
+        old = json.loads(run_path.read_text())
+        if old != identity:
+            raise VrechoError(f"out: {out} holds models of another dataset or seed ({old.get('dataset')}, seed "
+                              f"{old.get('seed')}); choose another folder")
+    elif any(out.iterdir()):
+        raise VrechoError(f"out: {out} is not empty and holds no vrecho run; choose an empty folder")
+    atomic_write_text(run_path, json.dumps(identity, indent=1))
+    (out / "models").mkdir(exist_ok=True)
     records_path = out / "training.json"
     records = json.loads(records_path.read_text()) if records_path.exists() else {}
     for m in chosen:
         path = out / "models" / f"{m.slug}.{'pt' if m.kind == 'cnn' else 'pkl'}"
-        if m.name in records and path.exists() and records[m.name].get("seed") == seed:
+        if m.name in records and path.exists():
             continue
         tr, va = harness.frames(m.protocol, "train"), harness.frames(m.protocol, "val")
         start = time.time()
