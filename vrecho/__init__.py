@@ -6,7 +6,8 @@ is an opening, a pane of glass or a mirror, and how far away it is. Modules, one
 ``acoustics`` (pyroomacoustics impulse responses and recordings), ``render`` (the ray-cast camera),
 ``features`` (log-mel and echo features), ``data`` (datasets), ``models`` (EchoCNN and baselines),
 ``train`` (targets, losses, the training loop), ``evaluate`` (the benchmark harness and tables),
-``classifier`` (``load_classifier``: shipped weights, ``predict``), ``listen`` (what the device
+``classifier`` (``load_classifier``: shipped weights, ``predict``), ``reconstruct`` (the camera's
+scan and, to come, its repair), ``listen`` (what the device
 hears), ``cli`` (the ``vrecho`` command).
 """
 
