@@ -4,9 +4,16 @@ This first part is the stand-in for the phone's scan: a walkthrough along the sc
 path renders grayscale and depth frames with the sensor's failures (it sees through glass and
 finds a phantom room behind a mirror), and open3d's TSDF fusion (``VoxelBlockGrid``; the legacy
 ``ScalableTSDFVolume`` returns empty meshes on open3d 0.20) turns them into a coloured mesh.
+
+Then the discontinuities: :func:`wall_planes` finds the room's walls by RANSAC (the nearest plane
+to the cameras in each direction, so a phantom room or the street beyond a window is not taken
+for a wall) and :func:`holes` the empty regions within each. The repair (the paper's Algorithm 1)
+comes next.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -68,3 +75,103 @@ def fuse(views: list[View], voxel_m: float = 0.03, trunc_voxels: float = 4.0, we
                                                        trunc_voxels)
         grid.integrate(blocks, depth, color, intrinsic, intrinsic, extrinsic, 1.0, DEPTH_MAX_M, trunc_voxels)
     return grid.extract_triangle_mesh(weight_threshold=weight_threshold).to_legacy()
+
+
+@dataclass
+class Plane:
+    """A planar surface found in the scan: unit ``normal`` pointing into the room (toward the
+    cameras), ``offset`` (points x with normal . x + offset = 0) and the inlier vertices."""
+
+    normal: np.ndarray
+    offset: float
+    inliers: np.ndarray  # (M, 3)
+
+    @property
+    def vertical(self) -> bool:
+        return abs(self.normal[2]) < 0.1
+
+    def frame(self) -> tuple[np.ndarray, np.ndarray]:
+        """In-plane unit axes (along the wall, up) of a vertical plane."""
+        up = np.array([0.0, 0.0, 1.0])
+        along = np.cross(up, self.normal)
+        return along / np.linalg.norm(along), up
+
+
+@dataclass
+class Hole:
+    """An empty region of a wall plane: its bounding rectangle in the wall's frame (``u`` along
+    the wall, ``z`` up, metres), its area and the plane."""
+
+    plane: Plane
+    u: tuple[float, float]
+    z: tuple[float, float]
+    area_m2: float
+
+    def corners(self) -> np.ndarray:
+        along, up = self.plane.frame()
+        origin = -self.plane.offset * self.plane.normal
+        return np.array([origin + a * along + b * up for a, b in
+                         ((self.u[0], self.z[0]), (self.u[1], self.z[0]), (self.u[1], self.z[1]), (self.u[0], self.z[1]))])
+
+
+def wall_planes(vertices: np.ndarray, cameras: np.ndarray, distance_m: float = 0.03, min_share: float = 0.01,
+                max_planes: int = 12, seed: int = 0) -> list[Plane]:
+    """The room's walls: planes found by RANSAC (open3d ``segment_plane``), one after another, of
+    which the vertical ones nearest the cameras in each direction are kept (a phantom room
+    behind a mirror, or buildings through a window, lie farther along the same directions)."""
+    import open3d as o3d
+
+    o3d.utility.random.seed(seed)
+    rest = np.asarray(vertices, float)
+    centre = np.asarray(cameras, float).mean(axis=0)
+    found = []
+    for _ in range(max_planes):
+        if len(rest) < max(3, min_share * len(vertices)):
+            break
+        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(rest))
+        (a, b, c, d), idx = pcd.segment_plane(distance_m, 3, 1000)
+        if len(idx) < min_share * len(vertices):
+            break
+        n = np.array([a, b, c]) / np.linalg.norm([a, b, c])
+        d = d / np.linalg.norm([a, b, c])
+        if n @ centre + d < 0:  # point the normal at the cameras
+            n, d = -n, -d
+        found.append(Plane(n, float(d), rest[idx]))
+        rest = np.delete(rest, idx, axis=0)
+    walls = []
+    for p in sorted((p for p in found if p.vertical), key=lambda p: p.normal @ centre + p.offset):
+        if all(p.normal @ w.normal < np.cos(np.radians(10)) for w in walls):
+            walls.append(p)
+    return walls
+
+
+def holes(plane: Plane, cell_m: float = 0.05, min_area_m2: float = 0.1) -> list[Hole]:
+    """Empty regions within the extent of a wall plane's inliers (a raster of ``cell_m`` cells)."""
+    from scipy import ndimage
+
+    along, up = plane.frame()
+    uz = np.stack([plane.inliers @ along, plane.inliers @ up], axis=1)
+    lo = uz.min(axis=0)
+    ij = np.floor((uz - lo) / cell_m).astype(int)
+    occupied = np.zeros(ij.max(axis=0) + 1, bool)
+    occupied[ij[:, 0], ij[:, 1]] = True
+    # The wall is the largest connected piece: distant geometry that happens to lie in the same
+    # plane (the ground outside, beyond a window) is cut away.
+    pieces, _ = ndimage.label(ndimage.binary_dilation(occupied, iterations=2))
+    sizes = np.bincount(pieces.ravel())
+    sizes[0] = 0
+    rows, cols = np.nonzero(pieces == sizes.argmax())
+    box = (slice(rows.min(), rows.max() + 1), slice(cols.min(), cols.max() + 1))
+    lo = lo + cell_m * np.array([box[0].start, box[1].start])
+    occupied = occupied[box] & (pieces[box] == sizes.argmax())
+    occupied = ndimage.binary_closing(occupied, iterations=1, border_value=1)
+    labels, _ = ndimage.label(~occupied)
+    out = []
+    for k, sl in enumerate(ndimage.find_objects(labels), start=1):
+        area = float((labels[sl] == k).sum()) * cell_m ** 2
+        if area < min_area_m2:
+            continue
+        u0, u1 = lo[0] + sl[0].start * cell_m, lo[0] + sl[0].stop * cell_m
+        z0, z1 = lo[1] + sl[1].start * cell_m, lo[1] + sl[1].stop * cell_m
+        out.append(Hole(plane, (u0, u1), (z0, z1), area))
+    return out
