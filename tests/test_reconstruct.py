@@ -85,3 +85,17 @@ def test_holes_in_the_walls_are_the_glass_opening_and_mirror(scan):
             union = np.prod([hi_t[i] - lo_t[i] for i in range(3) if hi_t[i] - lo_t[i] > 1e-6]) + h.area_m2 - inter
             best = max(best, inter / union)
         assert best > 0.6, (disc.kind, best)
+
+
+def test_geometry_beyond_the_walls_is_found(scan):
+    from vrecho.reconstruct import beyond_walls, wall_planes
+    from vrecho.scene import distance_to_polygon, point_in_polygon
+
+    scene, vertices = scan
+    cameras, _ = scene.camera_path.sample(24)
+    beyond = beyond_walls(vertices, wall_planes(vertices, cameras))
+    fp = scene.room.footprint
+    outside = ~point_in_polygon(vertices[:, :2], fp) & (distance_to_polygon(vertices[:, :2], fp) > 0.15)
+    assert outside.sum() > 1000 and beyond[outside].mean() > 0.9  # seen through glass, or a phantom
+    room = point_in_polygon(vertices[:, :2], fp) & (vertices[:, 2] > 0.05) & (vertices[:, 2] < scene.room.height_m - 0.05)
+    assert room.sum() > 1000 and beyond[room].mean() < 0.01  # the room's own walls are kept

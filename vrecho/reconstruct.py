@@ -7,7 +7,8 @@ finds a phantom room behind a mirror), and open3d's TSDF fusion (``VoxelBlockGri
 
 Then the discontinuities: :func:`wall_planes` finds the room's walls by RANSAC (the nearest plane
 to the cameras in each direction, so a phantom room or the street beyond a window is not taken
-for a wall) and :func:`holes` the empty regions within each. The repair (the paper's Algorithm 1)
+for a wall), :func:`holes` the empty regions within each and :func:`beyond_walls` the geometry
+behind them (seen through glass or an opening, or a mirror's phantom room). The repair (the paper's Algorithm 1)
 comes next.
 """
 
@@ -174,4 +175,14 @@ def holes(plane: Plane, cell_m: float = 0.05, min_area_m2: float = 0.1) -> list[
         u0, u1 = lo[0] + sl[0].start * cell_m, lo[0] + sl[0].stop * cell_m
         z0, z1 = lo[1] + sl[1].start * cell_m, lo[1] + sl[1].stop * cell_m
         out.append(Hole(plane, (u0, u1), (z0, z1), area))
+    return out
+
+
+def beyond_walls(vertices: np.ndarray, walls: list[Plane], margin_m: float = 0.1) -> np.ndarray:
+    """Which vertices lie more than ``margin_m`` behind a wall plane: what the camera saw through
+    glass or an opening, or the phantom room a mirror makes (the repair tells them apart)."""
+    v = np.asarray(vertices, float)
+    out = np.zeros(len(v), bool)
+    for w in walls:
+        out |= v @ w.normal + w.offset < -margin_m
     return out
