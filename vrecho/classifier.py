@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 from .errors import VrechoError
-from .features import check_frames, echo_features, logmel
+from .features import check_emitted, check_frames, echo_features, logmel
 from .models import DEPTH_BINS_M, build
 from .signals import FS, check_fs
 
@@ -102,7 +102,7 @@ class Classifier:
         clipped = np.mean(np.abs(x) >= CLIP_LEVEL * np.maximum(peak, 1.0), axis=1) >= CLIP_SHARE
         batch, key, narrow = {}, "A", np.zeros(len(x), bool)
         if emitted is not None:
-            s = _check_emitted(emitted, len(x), fs)
+            s = check_emitted(emitted, fs, len(x))
             f = echo_features(x, s, FS)
             batch["envelope"], batch["bands"] = torch.as_tensor(f.envelope), torch.as_tensor(f.bands)
             narrow = np.broadcast_to(_narrowband(s), (len(x),))
@@ -145,25 +145,6 @@ def _check_images(images, n: int) -> np.ndarray:
     if a.dtype.kind != "f" or not np.all(np.isfinite(a)) or a.min() < 0 or a.max() > 1:
         raise VrechoError("image: expected uint8, or finite floats in [0, 1]")
     return a.astype(np.float32)
-
-
-def _check_emitted(emitted, n: int, fs: int) -> np.ndarray:
-    """The emitted sound(s) at 44.1 kHz: (k,) for one sound for all frames, or (n, k)."""
-    s = np.asarray(emitted)
-    if s.dtype.kind not in "fiu" or s.ndim not in (1, 2) or (s.ndim == 2 and len(s) != n):
-        raise VrechoError(f"emitted: expected one sound (k,) or one per frame ({n}, k), got shape {s.shape}")
-    s = s.astype(np.float32)
-    if not np.all(np.isfinite(s)):
-        raise VrechoError("emitted: contains NaN or infinite samples")
-    if s.shape[-1] > fs:
-        raise VrechoError(f"emitted: longer than a 1 s frame ({s.shape[-1]} samples at {fs} Hz)")
-    if np.any(np.abs(s).max(axis=-1) == 0):
-        raise VrechoError("emitted: the emitted sound is silent")
-    if fs != FS:
-        import librosa
-
-        s = librosa.resample(s, orig_sr=fs, target_sr=FS, res_type="soxr_hq", axis=-1).astype(np.float32)
-    return s
 
 
 def _narrowband(s: np.ndarray) -> np.ndarray:

@@ -42,9 +42,10 @@ def _train(args) -> int:
 def _evaluate(args) -> int:
     from .evaluate import evaluate
 
-    evaluate(args.data, args.run, args.out, args.seed, progress=not args.quiet, methods=args.method)
-    print((args.out / "tables.md").read_text())
-    print(f"written to {args.out}: tables.md, results.csv, metrics.json, confusion_*.png, "
+    out = args.run / "evaluation" if args.out is None else args.out
+    evaluate(args.data, args.run, out, args.seed, progress=not args.quiet, methods=args.method)
+    print((out / "tables.md").read_text())
+    print(f"written to {out}: tables.md, results.csv, metrics.json, confusion_*.png, "
           "activation_maximisation_depth.png")
     return 0
 
@@ -108,8 +109,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if getattr(args, "run", None) is not None and getattr(args, "out", "unset") is None:
-        args.out = args.run / "evaluation"
     try:
         return args.func(args)
     except VrechoError as e:

@@ -76,6 +76,12 @@ def _block(preset: Preset) -> int:
     return (preset.n_poses + preset.n_sources) * len(SOUNDS)
 
 
+def recording_conditions(rng: np.random.Generator) -> tuple[float, float, float]:
+    """One recording's background noise and microphone self-noise (dB below the direct sound)
+    and recording gain (dB), drawn within PROTOCOL.md's ranges."""
+    return rng.uniform(20, 40), rng.uniform(55, 70), rng.uniform(-6, 0)
+
+
 def _scene_rows(out: Path, index: int, preset_name: str, seed: int, split: str, cache) -> list[dict]:
     """Simulate one room, write its arrays and return its label rows."""
     import zarr
@@ -119,7 +125,7 @@ def _scene_rows(out: Path, index: int, preset_name: str, seed: int, split: str, 
             row = len(rows)
             sound_seed = int(rng.integers(2 ** 31))
             sound = emitted_sound(name, FS, np.random.default_rng(sound_seed))
-            snr, self_noise, gain = rng.uniform(20, 40), rng.uniform(55, 70), rng.uniform(-6, 0)
+            snr, self_noise, gain = recording_conditions(rng)
             if is_echo:
                 onset = np.nan
                 x = record_pulse(ir, sound, device_direct_amplitude(scene, pose), rng, snr, self_noise, gain)
@@ -293,6 +299,12 @@ class Dataset:
         """PROTOCOL.md's benchmark: train sounds in train/val rooms, held-out sounds in test rooms."""
         return self.mask(split, kind, heard=split != "test")
 
+    def echo_ir_rows(self, split: str) -> np.ndarray:
+        """One stored frame per echo impulse response of a split (its first), in response order."""
+        m = self.mask(split, "echo")
+        _, first = np.unique(self.labels["ir"][m], return_index=True)
+        return np.where(m)[0][first]
+
     def probe_frames(self, split: str, probes: tuple[str, ...], seed: int = 0, progress: bool = False):
         """The product protocol's frames: each echo impulse response of a split heard with known
         probes, rendered now from the stored responses (noise, self-noise and gain drawn as in
@@ -322,9 +334,8 @@ class Dataset:
         if not set(probes) <= {"vrecho", "random"}:
             raise VrechoError(f"probes: expected 'vrecho' or 'random' entries, got {probes!r}")
         L = self.labels
-        m = self.mask(split, "echo")
-        irs, first = np.unique(L["ir"][m], return_index=True)
-        rows = np.where(m)[0][first]
+        rows = self.echo_ir_rows(split)
+        irs = L["ir"][rows]
         rng = np.random.default_rng([seed, 4099, ["train", "val", "test"].index(split)])
         own = probe()
         audio, emitted, out_rows, kinds = [], [], [], []
@@ -336,7 +347,7 @@ class Dataset:
             amp = device_direct_amplitude(scene, scene.poses[int(L["pose"][row])])
             for kind in probes:
                 sound = own if kind == "vrecho" else random_probe(rng)
-                audio.append(record_pulse(ir, sound, amp, rng, rng.uniform(20, 40), rng.uniform(55, 70), rng.uniform(-6, 0)))
+                audio.append(record_pulse(ir, sound, amp, rng, *recording_conditions(rng)))
                 emitted.append(sound)
                 out_rows.append(row)
                 kinds.append(kind)

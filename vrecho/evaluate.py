@@ -52,6 +52,10 @@ class Method:
     def model(self) -> EchoCNN:
         return EchoCNN(self.inputs, self.fusion, wave_layers=self.wave_layers)
 
+    def path(self, run) -> Path:
+        """Where a run folder keeps this method's trained model."""
+        return Path(run) / "models" / f"{self.slug}.{'pt' if self.kind == 'cnn' else 'pkl'}"
+
 
 METHODS = (
     Method("EchoCNN-A", "cnn", ("mel",)),
@@ -86,16 +90,16 @@ class Frames:
     """The frames of one protocol and split, with every input any method asks for, loaded once."""
 
     def __init__(self, ds, protocol: str, split: str, seed: int = 0, progress: bool = False):
-        self.ds, self.protocol, self.split = ds, protocol, split
+        self.ds, self.protocol, self.split, self.seed, self.progress = ds, protocol, split, seed, progress
+        self.audio = self.emitted = None  # read or rendered when an input needs them
         if protocol == "paper":
             self.rows = np.where(ds.paper_split(split, "echo") | ds.paper_split(split, "source"))[0]
-            self.audio = None
-            self.emitted = None
             self.group = ds.labels["sound"][self.rows]
         elif protocol == "product":
-            probes = {"train": PRODUCT_TRAIN_PROBES, "val": PRODUCT_VAL_PROBES}.get(split, PRODUCT_TEST_PROBES)
-            self.audio, self.emitted, self.rows, kinds = ds.probe_frames(split, probes, seed, progress)
-            self.group = np.char.add(kinds, " probe")
+            self.probes = {"train": PRODUCT_TRAIN_PROBES, "val": PRODUCT_VAL_PROBES}.get(split, PRODUCT_TEST_PROBES)
+            ir_rows = ds.echo_ir_rows(split)  # the order Dataset.probe_frames renders them in
+            self.rows = np.repeat(ir_rows, len(self.probes))
+            self.group = np.char.add(np.tile(np.asarray(self.probes, dtype=str), len(ir_rows)), " probe")
         else:
             raise VrechoError(f"protocol: expected paper or product, got {protocol!r}")
         self.y = targets(ds.labels, self.rows)
@@ -105,7 +109,9 @@ class Frames:
         return len(self.rows)
 
     def _audio(self) -> np.ndarray:
-        if self.audio is None:
+        if self.audio is None and self.protocol == "product":
+            self.audio, self.emitted, _, _ = self.ds.probe_frames(self.split, self.probes, self.seed, self.progress)
+        elif self.audio is None:
             self.audio = _read_rows(self.ds.audio, self.rows).astype(np.float32)
         return self.audio
 
@@ -126,8 +132,9 @@ class Frames:
             elif name == "wave":  # the SoundNet baselines' 11.025 kHz
                 self._x[name] = torch.as_tensor(resample_poly(self._audio(), 1, 4, axis=1).astype(np.float32))
             elif name in ("envelope", "bands"):
-                if self.emitted is None:
+                if self.protocol != "product":
                     raise VrechoError("echo features need the emitted sound: use the product protocol")
+                self._audio()
                 env, bands = [], []
                 for i in range(0, len(self), 256):
                     f = echo_features(self._audio()[i:i + 256], self.emitted[i:i + 256])
@@ -192,7 +199,7 @@ def train_methods(data, out, methods=None, seed: int = 0, epochs: int = 40, pati
     records_path = out / "training.json"
     records = json.loads(records_path.read_text()) if records_path.exists() else {}
     for m in chosen:
-        path = out / "models" / f"{m.slug}.{'pt' if m.kind == 'cnn' else 'pkl'}"
+        path = m.path(out)
         if m.name in records and path.exists():
             continue
         tr, va = harness.frames(m.protocol, "train"), harness.frames(m.protocol, "val")
@@ -219,19 +226,15 @@ def train_methods(data, out, methods=None, seed: int = 0, epochs: int = 40, pati
 
 
 def load_method(run, m: Method):
-    run = Path(run)
-    if m.kind == "cnn":
-        path = run / "models" / f"{m.slug}.pt"
-        if not path.exists():
-            raise VrechoError(f"{run}: {m.name} is not trained (no {path.name}); run `vrecho train` first")
-        saved = torch.load(path, weights_only=True)
-        model = build(saved["config"])
-        model.load_state_dict(saved["state"])
-        return model.eval()
-    path = run / "models" / f"{m.slug}.pkl"
+    path = m.path(run)
     if not path.exists():
         raise VrechoError(f"{run}: {m.name} is not trained (no {path.name}); run `vrecho train` first")
-    return pickle.loads(path.read_bytes())
+    if m.kind != "cnn":
+        return pickle.loads(path.read_bytes())
+    saved = torch.load(path, weights_only=True)
+    model = build(saved["config"])
+    model.load_state_dict(saved["state"])
+    return model.eval()
 
 
 def export_classifier(run, path) -> Path:
@@ -293,7 +296,7 @@ def evaluate(data, run, out, seed: int = 0, progress: bool = True, methods=None)
 
 
 def _trained(run, m: Method) -> bool:
-    return (Path(run) / "models" / f"{m.slug}.{'pt' if m.kind == 'cnn' else 'pkl'}").exists()
+    return m.path(run).exists()
 
 
 def _fmt(key: str, v: float) -> str:

@@ -68,6 +68,29 @@ def _mel_basis() -> np.ndarray:
     return librosa.filters.mel(sr=FS, n_fft=N_FFT, n_mels=N_MELS, fmax=FS / 2)  # built once: 2 ms a call
 
 
+def check_emitted(emitted, fs, n_frames: int | None = None) -> np.ndarray:
+    """Validate the emitted sound(s) and return them at 44.1 kHz (float32): one sound (k,) for
+    every frame, or, with ``n_frames``, one per frame (n_frames, k). Each must be finite, not
+    silent and at most one frame long; another sample rate is resampled."""
+    fs = check_fs(fs)
+    s = np.asarray(emitted)
+    if s.dtype.kind not in "fiu" or s.ndim not in (1, 2) or (s.ndim == 2 and len(s) != n_frames):
+        per_frame = "" if n_frames is None else f" or one per frame ({n_frames}, k)"
+        raise VrechoError(f"emitted: expected one sound (k,){per_frame}, got shape {s.shape}")
+    s = s.astype(np.float32)
+    if not np.all(np.isfinite(s)):
+        raise VrechoError("emitted: contains NaN or infinite samples")
+    if s.shape[-1] > round(FRAME_S * fs):
+        raise VrechoError(f"emitted: longer than a 1 s frame ({s.shape[-1]} samples at {fs} Hz)")
+    if np.any(np.abs(s).max(axis=-1) == 0):
+        raise VrechoError("emitted: the emitted sound is silent")
+    if fs != FS:
+        import librosa
+
+        s = librosa.resample(s, orig_sr=fs, target_sr=FS, res_type="soxr_hq", axis=-1).astype(np.float32)
+    return s
+
+
 def logmel(audio, fs: int = FS) -> np.ndarray:
     """The paper's normalised log-mel spectrogram.
 
@@ -126,35 +149,29 @@ def echo_response(audio, emitted, fs: int = FS, length_s: float | None = ECHO_WI
     numpy.ndarray, shape (..., round(length_s * 44100)), float32
     """
     x = check_frames(audio, fs)
-    s = np.asarray(emitted, dtype=np.float32)
-    if s.ndim not in (1, 2) or s.shape[-1] > round(FRAME_S * fs) or not np.all(np.isfinite(s)):
-        raise VrechoError(f"emitted: expected a finite sound of at most one frame, got shape {s.shape}")
-    if np.max(np.abs(s)) == 0:
-        raise VrechoError("emitted: the emitted sound is silent")
-    if check_fs(fs) != FS:
-        import librosa
-
-        s = librosa.resample(s, orig_sr=fs, target_sr=FS, res_type="soxr_hq", axis=-1)
+    s = check_emitted(emitted, fs, None if x.ndim == 1 else len(x))
     n = x.shape[-1]
     X = scipy.fft.rfft(x, n)
     if s.ndim == 1:  # one sound for every frame: its inverse filter, cached (a device repeats its probe)
-        G = _inverse_filter(s.astype(np.float32).tobytes(), n, regularization)
+        G = _cached_inverse_filter(s.tobytes(), n, regularization)
     else:
-        S = scipy.fft.rfft(s, n)
-        power = np.abs(S) ** 2
-        G = np.conj(S) / (power + regularization * power.max(axis=-1, keepdims=True))
+        G = _inverse_filter(s, n, regularization)
     h = scipy.fft.irfft(X * G, n)
     if length_s is not None:
         h = h[..., :int(round(length_s * FS))]
     return h.astype(np.float32)
 
 
-@functools.lru_cache(maxsize=8)
-def _inverse_filter(sound: bytes, n: int, regularization: float) -> np.ndarray:
-    """Wiener inverse filter ``S* / (|S|^2 + r max|S|^2)`` of a sound (float32 bytes), n-point."""
-    S = scipy.fft.rfft(np.frombuffer(sound, np.float32), n)
+def _inverse_filter(s: np.ndarray, n: int, regularization: float) -> np.ndarray:
+    """Wiener inverse filter ``S* / (|S|^2 + r max|S|^2)`` of sounds (..., k), n-point."""
+    S = scipy.fft.rfft(s, n)
     power = np.abs(S) ** 2
-    return np.conj(S) / (power + regularization * power.max())
+    return np.conj(S) / (power + regularization * power.max(axis=-1, keepdims=True))
+
+
+@functools.lru_cache(maxsize=8)
+def _cached_inverse_filter(sound: bytes, n: int, regularization: float) -> np.ndarray:
+    return _inverse_filter(np.frombuffer(sound, np.float32), n, regularization)
 
 
 @dataclass

@@ -103,7 +103,9 @@ class EchoBranch(nn.Module):
         self.fc = nn.Linear(3 * channels + 2, hidden)
         self.out_features = hidden + hidden // 2
 
-    def forward(self, envelope: torch.Tensor, bands: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(self, envelope: torch.Tensor, bands: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Features (B, out_features), depth (B,) in metres, and the delay scores (B, steps), which
+        training holds against the true echo delay (see :func:`vrecho.train.loss_fn`)."""
         x = torch.log10(envelope.clamp_min(1e-4))[:, None] / 4.0  # 80 dB of range to [-1, 0]
         h = F.relu(self.stem(x))
         for conv, norm in zip(self.convs, self.norms):
@@ -119,11 +121,10 @@ class EchoBranch(nn.Module):
         w = torch.softmax(scores.masked_fill(~near, -1e4), dim=1)
         depth = (w * self.depth_at).sum(1)
         level = (w * level_at).sum(1, keepdim=True)
-        self.delay_scores = scores  # trained against the true echo delay (see train.loss_fn)
         z = torch.cat([(w[:, None] * h).sum(2), h.amax(2), h.mean(2), level, depth[:, None]], dim=1)
         e = F.relu(self.fc(z))
         b = F.relu(self.fc_bands(torch.flatten(bands, 1) / 60.0))
-        return torch.cat([e, b], dim=1), depth
+        return torch.cat([e, b], dim=1), depth, scores
 
 
 class SoundNetBranch(nn.Module):
@@ -227,7 +228,7 @@ class EchoCNN(nn.Module):
         feats, echo_depth = [], None
         for name, branch in self.branches.items():
             if name == "echo":
-                f, echo_depth = branch(batch["envelope"], batch["bands"])
+                f, echo_depth, delay_scores = branch(batch["envelope"], batch["bands"])
                 feats.append(f)
             else:
                 feats.append(branch(batch[name]))
@@ -244,7 +245,7 @@ class EchoCNN(nn.Module):
             # their own: for an echo read to a centimetre a separate classifier only adds errors.
             for head, centres in (("depth_bin", self.depth_bins), ("depth_ft", self.depth_ft)):
                 out[head] = -(out["depth_m"][:, None] - centres[None]).abs() / 0.1
-            out["delay_scores"] = self.branches["echo"].delay_scores
+            out["delay_scores"] = delay_scores
             out["depth_at"] = self.branches["echo"].depth_at
         return out
 
