@@ -32,8 +32,11 @@ def _peak_time(h: np.ndarray, lo: int, hi: int) -> float:
 
 @pytest.mark.parametrize("depth", DEPTHS_M)
 def test_echo_delay_and_opening_energy(depth, tmp_path):
+    from vrecho.features import echo_at
+    from vrecho.reconstruct import ECHO_CLOSED_DB
+
     sound = probe()
-    energies = {}
+    energies, levels = {}, {}
     for kind in ("glass", "open"):
         scene = _scene(kind)
         pose = face(scene, 0, depth, offset_z_m=-0.1)  # emitter 1.2 m above the floor
@@ -47,7 +50,9 @@ def test_echo_delay_and_opening_energy(depth, tmp_path):
         centre = int(round(t_direct + expected))
         window = slice(centre - half, centre + half + 1)
         energies[kind] = float(np.sum(h[window] ** 2))
+        levels[kind], measured = echo_at(frame, sound, depth + 0.02)  # the scan's plane, 2 cm off
         if kind == "glass":
+            assert abs(measured - depth) < 0.01
             t_echo = _peak_time(h, centre - half, centre + half + 1)
             # Sample 0 of the estimate is the emission instant. The echo arrives 2d/c after the
             # emission; the direct sound itself needs 0.07 m / c = 0.2 ms to reach the microphone,
@@ -56,6 +61,7 @@ def test_echo_delay_and_opening_energy(depth, tmp_path):
             assert abs(t_echo / FS - 2 * depth / SPEED_OF_SOUND) < 0.2e-3
             assert abs((t_echo - t_direct) - expected) / FS < 0.03e-3  # a sub-sample read of the echo
     assert 10 * np.log10(energies["glass"] / energies["open"]) >= 10.0
+    assert levels["glass"] > ECHO_CLOSED_DB > levels["open"], levels  # the repair's open/closed echo test
 
 
 def test_headset_array_hears_each_microphone_at_its_distance(tmp_path):

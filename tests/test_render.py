@@ -59,3 +59,15 @@ def test_crop_needs_a_discontinuity(world):
     pose.target = None
     with pytest.raises(VrechoError, match="no discontinuity"):
         crop(world, pose)
+
+
+def test_a_crop_from_a_camera_frame_matches_the_ray_traced_crop():
+    from vrecho.render import crop_view
+
+    scene = builtin_scene()
+    world = World(scene)
+    pose = next(p for p in scene.poses if scene.depth_m(p) > 2.5)  # far enough for the frame to hold the region
+    view = render_view(world, camera_pose(pose.camera, pose.forward), Camera())
+    image, inside = crop_view(view, scene.discontinuity_corners(pose.target))
+    assert inside == 1.0
+    assert np.abs(image.astype(int) - crop(world, pose)).mean() < 3  # of 255

@@ -50,6 +50,19 @@ def _evaluate(args) -> int:
     return 0
 
 
+def _reconstruct(args) -> int:
+    from .reconstruct import run, summary
+
+    result = run(args.scene, args.out, args.labels, args.variant, args.frames, args.seed, args.save_scan,
+                 progress=not args.quiet)
+    print(summary(result))
+    s = result.seconds
+    print(f"{len(result.surfaces)} surfaces added; discontinuities and repair {s['total_without_simulation']:.1f} s")
+    print(f"written to {args.out}: initial.ply, repaired.ply, report.json, before_after.png"
+          + (", scan/" if args.save_scan else ""))
+    return 0
+
+
 def _demo(args) -> int:
     from .listen import run_demo
 
@@ -96,6 +109,24 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--seed", type=int, default=0, help="seed of the product protocol's probes (default: 0)")
     e.add_argument("--quiet", action="store_true", help="no progress bars")
     e.set_defaults(func=_evaluate)
+
+    r = sub.add_parser("reconstruct", help="scan a scene, find its glass, mirrors and openings, and repair the scan",
+                       description="The initial reconstruction (a walkthrough fused by TSDF, with the camera's glass and "
+                                   "mirror failures), its discontinuities (wall planes, holes, phantom geometry) and the "
+                                   "repair of the paper's Algorithm 1 with EchoCNN's answers (or the truth).")
+    r.add_argument("scene", help="'builtin' (the living room), a scene JSON file, or a scan folder (frames.npz, "
+                                 "optional mesh.ply and echoes.npz; see vrecho.reconstruct.load_scan)")
+    r.add_argument("--out", required=True, type=Path, help="output folder")
+    r.add_argument("--labels", choices=("echocnn", "echocnn-only", "oracle"), default="echocnn",
+                   help="who decides what each hole is: EchoCNN with the scan's evidence (default), EchoCNN alone, "
+                        "or the scene's truth")
+    r.add_argument("--variant", choices=("simplified", "per_vertex"), default="simplified",
+                   help="Algorithm 1's fill: a new convex face, or the scan's own rim vertices moved (default: simplified)")
+    r.add_argument("--frames", type=int, default=60, help="walkthrough frames of a simulated scan (default: 60)")
+    r.add_argument("--seed", type=int, default=0, help="seed of the simulated recordings (default: 0)")
+    r.add_argument("--save-scan", action="store_true", help="also write the scan (OUT/scan, the scan-folder format)")
+    r.add_argument("--quiet", action="store_true", help="no progress bars")
+    r.set_defaults(func=_reconstruct)
 
     d = sub.add_parser("demo", help="run vrecho on its built-in living room",
                        description="Simulate the built-in scene (or --scene FILE): what the device hears in "

@@ -287,14 +287,69 @@ def crop(world: World | Scene, pose: DevicePose, index: int | None = None, shape
     index = pose.target if index is None else index
     if index is None or not 0 <= index < len(scene.discontinuities):
         raise VrechoError(f"crop: no discontinuity {index!r} to look at")
-    c = scene.discontinuity_corners(index)  # (u0,z0), (u1,z0), (u1,z1), (u0,z1)
-    rows, cols = shape
-    a = np.linspace(-margin, 1 + margin, cols)[None, :, None]  # image left to right: u1 to u0
-    b = np.linspace(1 + margin, -margin, rows)[:, None, None]  # image top to bottom: z1 to z0
-    grid = c[1] + a * (c[0] - c[1]) + b * (c[3] - c[0])
-    targets = grid.reshape(-1, 3)
+    targets = _crop_grid(scene.discontinuity_corners(index), shape, margin)
     origin = pose.camera
     dirs = targets - origin
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     gray = world.trace(np.broadcast_to(origin, dirs.shape).copy(), dirs)
-    return np.round(255 * gray.reshape(rows, cols)).astype(np.uint8)
+    return np.round(255 * gray.reshape(shape)).astype(np.uint8)
+
+
+def crop_view(view: View, corners: np.ndarray, shape: tuple[int, int] = CROP_SHAPE,
+              margin: float = 0.15) -> tuple[np.ndarray, float]:
+    """The same crop as :func:`crop`, resampled (bilinearly) from a camera frame: what a real
+    capture gives. ``corners`` (4, 3): a wall rectangle wound like the scene's walls, (u0, z0),
+    (u1, z0), (u1, z1), (u0, z1). Points outside the frame or behind the camera are black.
+
+    Returns
+    -------
+    crop : numpy.ndarray, shape (64, 25), uint8
+    inside : float
+        Share of the crop that lies within the frame (1 when the frame holds all of it).
+    """
+    from scipy.ndimage import map_coordinates
+
+    cam = (_crop_grid(np.asarray(corners, float), shape, margin) - view.pose[:3, 3]) @ view.pose[:3, :3]
+    z = cam[:, 2]
+    K = view.intrinsics
+    with np.errstate(divide="ignore", invalid="ignore"):
+        col = K[0, 0] * cam[:, 0] / z + K[0, 2]
+        row = K[1, 1] * cam[:, 1] / z + K[1, 2]
+    h, w = view.gray.shape
+    ok = (z > 1e-3) & (col >= 0) & (col <= w - 1) & (row >= 0) & (row <= h - 1)
+    gray = np.zeros(len(cam))
+    gray[ok] = map_coordinates(view.gray.astype(np.float64), [row[ok], col[ok]], order=1)
+    return np.round(255 * np.clip(gray, 0, 1).reshape(shape)).astype(np.uint8), float(ok.mean())
+
+
+def _crop_grid(c: np.ndarray, shape: tuple[int, int], margin: float) -> np.ndarray:
+    """World points (rows * cols, 3) of a crop of the rectangle ``c``: left to right from u1 to
+    u0 (the wall seen from the room), top to bottom from z1 to z0, widened by ``margin``."""
+    rows, cols = shape
+    a = np.linspace(-margin, 1 + margin, cols)[None, :, None]
+    b = np.linspace(1 + margin, -margin, rows)[:, None, None]
+    return (c[1] + a * (c[0] - c[1]) + b * (c[3] - c[0])).reshape(-1, 3)
+
+
+def render_mesh(mesh, pose: np.ndarray, camera: Camera = Camera()) -> np.ndarray:
+    """An RGB picture (H, W, 3) in [0, 1] of an open3d triangle mesh from a camera-to-world
+    ``pose``: vertex colours, lit from the camera (headless: ray casting, no OpenGL)."""
+    import open3d as o3d
+
+    rc = o3d.t.geometry.RaycastingScene()
+    rc.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
+    rays = rc.create_rays_pinhole(o3d.core.Tensor(camera.intrinsics), o3d.core.Tensor(np.linalg.inv(pose)),
+                                  camera.width, camera.height)
+    ans = rc.cast_rays(rays)
+    hit = np.isfinite(ans["t_hit"].numpy())
+    prim = ans["primitive_ids"].numpy()
+    normals = ans["primitive_normals"].numpy()
+    dirs = rays.numpy()[..., 3:]
+    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    tris = np.asarray(mesh.triangles)
+    colours = np.asarray(mesh.vertex_colors) if mesh.has_vertex_colors() else np.full((len(mesh.vertices), 3), 0.7)
+    img = np.ones((camera.height, camera.width, 3))
+    p = prim[hit]
+    light = 0.35 + 0.65 * np.abs(np.sum(normals[hit] * dirs[hit], axis=-1))
+    img[hit] = colours[tris[p]].mean(axis=1) * light[:, None]
+    return np.clip(img, 0, 1)

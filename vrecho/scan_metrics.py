@@ -1,0 +1,151 @@
+"""How good a repaired scan is, against the scene's truth (the benchmark of the reconstruction).
+
+Every metric reads only meshes, so any method is judged alike (vrecho's repair, open3d's
+generic hole filling, no repair at all):
+
+- the surface a method *added* is the part of its mesh more than 2 cm from the initial scan;
+  rasterised on each true glass, mirror or opening rectangle (3 cm cells, 0.5 m around it);
+- ``closed_iou``: area IoU of the added surface with each true glass or mirror rectangle;
+- ``openings_filled``: share of openings more than half covered by added surface;
+- ``phantom_removed``: share of the initial scan's phantom area (behind the walls and farther
+  than 15 cm from any real surface: what a mirror makes) that is gone;
+- ``depth_error_cm``: per filled glass or mirror, the median distance of its added surface
+  from the true plane;
+- ``chamfer_cm``: symmetric Chamfer distance, the mean of (mesh to the true scene, outside
+  included) and (the room's true boundary, openings excluded, to the mesh).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .render import World, _triangulate
+from .scene import Scene, distance_to_polygon, point_in_polygon
+
+ADDED_M = 0.02
+CELL_M = 0.03
+PHANTOM_M = 0.15
+
+
+def _rc(mesh):
+    import open3d as o3d
+
+    rc = o3d.t.geometry.RaycastingScene()
+    rc.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
+    return rc
+
+
+def _distance(rc, points: np.ndarray) -> np.ndarray:
+    import open3d as o3d
+
+    if not len(points):
+        return np.zeros(0)
+    return rc.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy().astype(float)
+
+
+def sample_surface(mesh, density_per_m2: float, seed: int = 0) -> np.ndarray:
+    """Points spread uniformly over a mesh's area, ``density_per_m2`` of them per square metre."""
+    v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    if not len(t):
+        return np.zeros((0, 3))
+    a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
+    area = np.nan_to_num(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1))
+    rng = np.random.default_rng(seed)
+    n = rng.poisson(area * density_per_m2)
+    idx = np.repeat(np.arange(len(t)), n)
+    r1, r2 = rng.random(len(idx)), rng.random(len(idx))
+    s = np.sqrt(r1)
+    return (1 - s)[:, None] * a[idx] + (s * (1 - r2))[:, None] * b[idx] + (s * r2)[:, None] * c[idx]
+
+
+def _sample_polygons(polygons: list[np.ndarray], density_per_m2: float, seed: int = 0) -> np.ndarray:
+    import open3d as o3d
+
+    verts, tris = [], []
+    for p in polygons:
+        tris.append(_triangulate(p) + sum(len(v) for v in verts))
+        verts.append(p)
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.vstack(verts)),
+                                     o3d.utility.Vector3iVector(np.vstack(tris).astype(np.int32)))
+    return sample_surface(mesh, density_per_m2, seed)
+
+
+def added_surface(initial, mesh, near: tuple[np.ndarray, np.ndarray] | None = None,
+                  density_per_m2: float = 10_000.0) -> np.ndarray:
+    """Points (N, 3) on the parts of ``mesh`` more than 2 cm from ``initial`` (within the box
+    ``near`` = (lo, hi) when given)."""
+    import open3d as o3d
+
+    rc = _rc(initial)
+    v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    centroids = v[t].mean(axis=1)
+    # Candidates: triangles with a vertex or the centroid off the initial scan.
+    far = _distance(rc, v) > ADDED_M
+    cand = far[t].any(axis=1) | (_distance(rc, centroids) > ADDED_M)
+    if near is not None:
+        cand &= np.all((centroids > near[0]) & (centroids < near[1]), axis=1)
+    sub = o3d.geometry.TriangleMesh(mesh.vertices, o3d.utility.Vector3iVector(t[cand]))
+    pts = sample_surface(sub, density_per_m2)
+    return pts[_distance(rc, pts) > ADDED_M]
+
+
+def phantom_area_m2(scene: Scene, mesh, world: World | None = None, density_per_m2: float = 400.0) -> float:
+    """Area of a mesh behind the room's walls and farther than 15 cm from any real surface."""
+    world = World(scene) if world is None else world
+    pts = sample_surface(mesh, density_per_m2, seed=1)
+    fp = scene.room.footprint
+    outside = ~point_in_polygon(pts[:, :2], fp) & (distance_to_polygon(pts[:, :2], fp) > 0.1)
+    pts = pts[outside]
+    return float(np.sum(_distance(world._rc, pts) > PHANTOM_M)) / density_per_m2
+
+
+def score(scene: Scene, initial, mesh, world: World | None = None, n_chamfer: int = 40_000) -> dict:
+    """The metrics of the module's docstring for ``mesh``, a repair of the scan ``initial``."""
+    world = World(scene) if world is None else world
+    fp = scene.room.footprint
+    box = (np.r_[fp.min(axis=0) - 1.0, -1.0], np.r_[fp.max(axis=0) + 1.0, scene.room.height_m + 1.0])
+    added = added_surface(initial, mesh, box)
+    ious, depth_errors, open_cover = [], [], []
+    for k, d in enumerate(scene.discontinuities):
+        origin, u, normal = scene.room.wall_frame(d.wall)
+        u0, u1, z0, z1 = d.bounds()
+        rel = added - origin
+        off = rel @ normal
+        uz = np.stack([rel @ u, rel[:, 2]], axis=1)
+        near = (np.abs(off) < 0.3) & (uz[:, 0] > u0 - 0.5) & (uz[:, 0] < u1 + 0.5) & (uz[:, 1] > z0 - 0.5) & (uz[:, 1] < z1 + 0.5)
+        lo = np.array([u0 - 0.5, z0 - 0.5])
+        shape = tuple(np.ceil((np.array([u1 + 0.5, z1 + 0.5]) - lo) / CELL_M).astype(int))
+        filled = np.zeros(shape, bool)
+        ij = np.clip(((uz[near] - lo) / CELL_M).astype(int), 0, np.array(shape) - 1)
+        filled[ij[:, 0], ij[:, 1]] = True
+        cu = lo[0] + CELL_M * (np.arange(shape[0]) + 0.5)
+        cz = lo[1] + CELL_M * (np.arange(shape[1]) + 0.5)
+        truth = ((cu > u0) & (cu < u1))[:, None] & ((cz > z0) & (cz < z1))[None, :]
+        inter = (filled & truth).sum()
+        if d.is_open:
+            open_cover.append(inter / truth.sum())
+            continue
+        ious.append(inter / (filled | truth).sum())
+        inside = near & (uz[:, 0] > u0) & (uz[:, 0] < u1) & (uz[:, 1] > z0) & (uz[:, 1] < z1)
+        if inside.sum() > 10:
+            depth_errors.append(100 * float(np.median(np.abs(off[inside]))))
+    shell = [p.corners for p in scene.patches() if p.kind != "open"]
+    truth_pts = _sample_polygons(shell, 1.0)
+    truth_pts = truth_pts[np.random.default_rng(2).permutation(len(truth_pts))[:n_chamfer]] if len(truth_pts) > n_chamfer \
+        else _sample_polygons(shell, n_chamfer / sum(0.5 * np.linalg.norm(np.cross(p[1:-1] - p[0], p[2:] - p[0]), axis=1).sum()
+                                                     for p in shell), 2)
+    mesh_pts = sample_surface(mesh, n_chamfer / max(mesh.get_surface_area(), 1e-9), seed=3)
+    chamfer = 0.5 * (_distance(world._rc, mesh_pts).mean() + _distance(_rc(mesh), truth_pts).mean())
+    phantom0 = phantom_area_m2(scene, initial, world)
+    phantom = phantom_area_m2(scene, mesh, world)
+    return {
+        "closed_iou": float(np.mean(ious)) if ious else None,
+        "closed_ious": [float(x) for x in ious],
+        "openings_filled": float(np.mean(np.array(open_cover) > 0.5)) if open_cover else None,
+        "n_openings": len(open_cover),
+        "phantom_m2_initial": phantom0,
+        "phantom_m2": phantom,
+        "phantom_removed": 1 - phantom / phantom0 if phantom0 > 0.1 else None,
+        "depth_error_cm": depth_errors,
+        "chamfer_cm": 100 * float(chamfer),
+    }
