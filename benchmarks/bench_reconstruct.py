@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from vrecho.reconstruct import Scan, reconstruct, scan_scene
+from vrecho.reconstruct import reconstruct, scan_scene
 from vrecho.render import World
 from vrecho.scan_metrics import score
 from vrecho.scene import random_scene

@@ -1,15 +1,19 @@
-"""Echo-reconstruction: the camera's scan of a room, with its glass and mirror failures.
+"""Echo-reconstruction: the camera's scan of a room, its glass and mirror failures, and their repair.
 
-This first part is the stand-in for the phone's scan: a walkthrough along the scene's camera
-path renders grayscale and depth frames with the sensor's failures (it sees through glass and
-finds a phantom room behind a mirror), and open3d's TSDF fusion (``VoxelBlockGrid``; the legacy
-``ScalableTSDFVolume`` returns empty meshes on open3d 0.20) turns them into a coloured mesh.
-
-Then the discontinuities: :func:`wall_planes` finds the room's walls by RANSAC (the nearest plane
-to the cameras in each direction, so a phantom room or the street beyond a window is not taken
-for a wall), :func:`holes` the empty regions within each and :func:`beyond_walls` the geometry
-behind them (seen through glass or an opening, or a mirror's phantom room). The repair (the paper's Algorithm 1)
-comes next.
+1. **Scan** (:func:`scan_scene`, or :func:`load_scan` for a user's capture): a walkthrough
+   along the scene's camera path renders grayscale and depth frames with the sensor's failures
+   (it sees through glass, or gets nothing back, and finds a phantom room behind a mirror), and
+   open3d's TSDF fusion (``VoxelBlockGrid``; the legacy ``ScalableTSDFVolume`` returns empty
+   meshes on open3d 0.20) turns them into a coloured mesh.
+2. **Discontinuities**: :func:`wall_planes` (RANSAC; the nearest plane to the cameras in each
+   direction that is not seen only through another), :func:`holes` (free space carved by the
+   depth frames) and :func:`beyond_walls` (geometry behind the walls).
+3. **What each hole is**: :func:`infer` asks EchoCNN about the frames that look at it
+   (:func:`facing`) and adds what the scan knows (the echo's expected delay, the mirror test by
+   reflection); :func:`oracle` reads the truth.
+4. **Repair**, the paper's Algorithm 1 (:func:`repair`, both its variants); :func:`reconstruct`
+   runs 2 to 4 and :func:`run` is ``vrecho reconstruct``. Metrics against the truth:
+   :mod:`vrecho.scan_metrics`.
 """
 
 from __future__ import annotations
@@ -154,8 +158,8 @@ class Hole:
         return np.all(sign * cross >= -margin_m, axis=1)
 
 
-def wall_planes(vertices: np.ndarray, cameras: np.ndarray, distance_m: float = 0.03, min_share: float = 0.01,
-                max_planes: int = 12, seed: int = 0) -> list[Plane]:
+def wall_planes(vertices: np.ndarray, cameras: np.ndarray, distance_m: float = 0.03, min_share: float = 0.003,
+                max_planes: int = 20, seed: int = 0) -> list[Plane]:
     """The room's walls: planes found by RANSAC (open3d ``segment_plane``), one after another, of
     which the vertical ones nearest the cameras in each direction are kept (a phantom room
     behind a mirror, or buildings through a window, lie farther along the same directions)."""
@@ -178,11 +182,53 @@ def wall_planes(vertices: np.ndarray, cameras: np.ndarray, distance_m: float = 0
             n, d = -n, -d
         found.append(Plane(n, float(d), rest[idx]))
         rest = np.delete(rest, idx, axis=0)
+    vertical = [p for p in found if p.vertical]
+    # What is seen only through another plane (the outside's facades through a window, a mirror's
+    # phantom room, whose walls may be coplanar with the room's own) lies behind a wall, where the
+    # line from the cameras to it crosses that wall's scanned extent: such points are dropped,
+    # and a plane left with few points is no wall. Walls are vertical: the rest is refitted so.
+    direct = []
+    for p in vertical:
+        keep = np.ones(len(p.inliers), bool)
+        for q in vertical:
+            if q is not p:
+                keep &= ~_occluded(p.inliers, q, centre)
+        if keep.sum() >= max(3, min_share * len(vertices)):
+            direct.append(_vertical_fit(p.inliers[keep], centre))
     walls = []
-    for p in sorted((p for p in found if p.vertical), key=lambda p: p.normal @ centre + p.offset):
+    for p in sorted(direct, key=lambda p: p.normal @ centre + p.offset):
         if all(p.normal @ w.normal < np.cos(np.radians(10)) for w in walls):
             walls.append(p)
     return walls
+
+
+def _occluded(points: np.ndarray, q: Plane, centre: np.ndarray) -> np.ndarray:
+    """Which points (bool (N,)) lie behind ``q`` where their line of sight from ``centre`` crosses
+    ``q`` within the extent (5th to 95th percentile) of ``q``'s inliers."""
+    dc, dp = float(q.normal @ centre + q.offset), points @ q.normal + q.offset
+    out = np.zeros(len(points), bool)
+    crosses = np.flatnonzero((dp < -0.05) & (dc > 0))
+    if not len(crosses):
+        return out
+    t = dc / (dc - dp[crosses])
+    x = centre + t[:, None] * (points[crosses] - centre)
+    axes = np.stack(q.frame(), axis=1)
+    lo, hi = np.percentile(q.inliers @ axes, [5, 95], axis=0)
+    uz = x @ axes
+    out[crosses] = np.all((uz >= lo) & (uz <= hi), axis=1)
+    return out
+
+
+def _vertical_fit(points: np.ndarray, centre: np.ndarray) -> Plane:
+    """The vertical plane through ``points`` by least squares (a line fit to their footprint),
+    its normal toward ``centre``."""
+    xy = points[:, :2] - points[:, :2].mean(axis=0)
+    _, _, vt = np.linalg.svd(xy, full_matrices=False)
+    n = np.r_[vt[-1], 0.0]
+    d = -float(np.mean(points @ n))
+    if n @ centre + d < 0:
+        n, d = -n, -d
+    return Plane(n, d, points)
 
 
 def holes(plane: Plane, views: list[View], walls: list[Plane] = (), cell_m: float = 0.03, min_area_m2: float = 0.1,
@@ -588,7 +634,7 @@ def repair(mesh, holes_: list[Hole], decisions: list[Decision], cameras: np.ndar
         elif d.state == "open":  # loose pieces floating in the opening
             centroids = np.asarray(out.vertices)[np.asarray(out.triangles)].mean(axis=1)
             near = np.abs(centroids @ hole.plane.normal + hole.plane.offset) < 0.1
-            frag = near & hole.contains(centroids, -0.0) & ~remove
+            frag = near & hole.contains(centroids) & ~remove
             actions[k]["fragment_triangles_removed"] = int(frag.sum())
             remove |= frag
     out.remove_triangles_by_mask(remove)

@@ -43,6 +43,19 @@ def _distance(rc, points: np.ndarray) -> np.ndarray:
     return rc.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy().astype(float)
 
 
+def _area(mesh) -> float:
+    v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    if not len(t):
+        return 0.0
+    return float(np.nansum(0.5 * np.linalg.norm(np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]), axis=1)))
+
+
+def capped_density(mesh, density_per_m2: float, max_points: int = 3_000_000) -> float:
+    """``density_per_m2``, lowered where the mesh is so large (a generic hole filler's triangles
+    can span the outdoors) that more than ``max_points`` would be drawn."""
+    return min(density_per_m2, max_points / max(_area(mesh), 1e-9))
+
+
 def sample_surface(mesh, density_per_m2: float, seed: int = 0) -> np.ndarray:
     """Points spread uniformly over a mesh's area, ``density_per_m2`` of them per square metre."""
     v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
@@ -85,13 +98,14 @@ def added_surface(initial, mesh, near: tuple[np.ndarray, np.ndarray] | None = No
     if near is not None:
         cand &= np.all((centroids > near[0]) & (centroids < near[1]), axis=1)
     sub = o3d.geometry.TriangleMesh(mesh.vertices, o3d.utility.Vector3iVector(t[cand]))
-    pts = sample_surface(sub, density_per_m2)
+    pts = sample_surface(sub, capped_density(sub, density_per_m2))
     return pts[_distance(rc, pts) > ADDED_M]
 
 
 def phantom_area_m2(scene: Scene, mesh, world: World | None = None, density_per_m2: float = 400.0) -> float:
     """Area of a mesh behind the room's walls and farther than 15 cm from any real surface."""
     world = World(scene) if world is None else world
+    density_per_m2 = capped_density(mesh, density_per_m2)
     pts = sample_surface(mesh, density_per_m2, seed=1)
     fp = scene.room.footprint
     outside = ~point_in_polygon(pts[:, :2], fp) & (distance_to_polygon(pts[:, :2], fp) > 0.1)
