@@ -504,8 +504,10 @@ def oracle(scene: Scene, holes_: list[Hole]) -> list[Decision]:
             wall = int(np.argmax([hole.plane.normal @ -scene.room.wall_frame(w)[2]
                                   for w in range(len(scene.room.footprint))]))
         origin, _, normal = scene.room.wall_frame(wall)
+        c = hole.polygon().mean(axis=0)
+        on_wall = c - ((c - origin) @ normal) * normal  # the true wall at the hole's centre
         material = scene.discontinuities[k].kind if k is not None else "wall"
-        out.append(Decision("closed", material, float(-(hole.plane.normal @ origin)), 1.0,
+        out.append(Decision("closed", material, float(-(hole.plane.normal @ on_wall)), 1.0,
                             float(material == "mirror"), 1.0, "oracle"))
     return out
 
