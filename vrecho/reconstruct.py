@@ -182,7 +182,11 @@ def wall_planes(vertices: np.ndarray, cameras: np.ndarray, distance_m: float = 0
             n, d = -n, -d
         found.append(Plane(n, float(d), rest[idx]))
         rest = np.delete(rest, idx, axis=0)
+    # RANSAC also strings scattered points (the outdoors, seen in pieces) into planes: a wall is
+    # a dense surface, at least a tenth as dense as the densest plane found.
     vertical = [p for p in found if p.vertical]
+    density = [_density(p) for p in vertical]
+    vertical = [p for p, rho in zip(vertical, density) if rho >= 0.1 * max(density, default=0.0)]
     # What is seen only through another plane (the outside's facades through a window, a mirror's
     # phantom room, whose walls may be coplanar with the room's own) lies behind a wall, where the
     # line from the cameras to it crosses that wall's scanned extent: such points are dropped,
@@ -200,6 +204,13 @@ def wall_planes(vertices: np.ndarray, cameras: np.ndarray, distance_m: float = 0
         if all(p.normal @ w.normal < np.cos(np.radians(10)) for w in walls):
             walls.append(p)
     return walls
+
+
+def _density(p: Plane) -> float:
+    """Inliers per square metre of the plane's extent (5th to 95th percentile)."""
+    uz = p.inliers @ np.stack(p.frame(), axis=1)
+    lo, hi = np.percentile(uz, [5, 95], axis=0)
+    return 0.9 * len(p.inliers) / max(float(np.prod(hi - lo)), 1e-3)
 
 
 def _occluded(points: np.ndarray, q: Plane, centre: np.ndarray) -> np.ndarray:
@@ -388,6 +399,8 @@ ECHO_CLOSED_DB = -2.5
 """Level (dB, :func:`~vrecho.features.echo_at`) at the scanned plane's delay above which the
 echo says closed. Set on the living room and four rooms of seed 1000 (not the benchmark's):
 closed surfaces read a median of 0.4 to 4 dB over frames, openings -4.7 to -11 dB."""
+ECHO_SLOPE_DB = 1.0
+"""Width of the logistic around :data:`ECHO_CLOSED_DB`: 2.5 dB off it is 92 % one way."""
 MIRROR_SHARE = 0.15
 """Share of seen-through geometry that, reflected, lands on the room: above it, a mirror (the
 living room: mirror 0.27, window 0.006, opening 0.04)."""
@@ -408,8 +421,9 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, classifier=None
 
     With ``use_scan`` (vrecho's choice) the scan adds what it knows, by physics: the wall around
     the hole is scanned, so the delay of a closed surface's echo is known; the level there
-    (:func:`~vrecho.features.echo_at`, median over frames, a logistic around
-    :data:`ECHO_CLOSED_DB`) joins EchoCNN's open/closed log-odds, and the depth comes from the
+    (:func:`~vrecho.features.echo_at`, median over the frames whose specular point, the foot of
+    the emitter's perpendicular, falls in the hole; a logistic around :data:`ECHO_CLOSED_DB`)
+    joins EchoCNN's open/closed log-odds, and the depth comes from the
     EchoCNN echo when it agrees with the scan within 10 cm, else from the echo nearest the
     scan's delay. The geometry seen through the hole, reflected in its plane
     (:func:`mirror_evidence`), says mirror or not where it is clear; EchoCNN's material answers
@@ -441,6 +455,10 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, classifier=None
             if use_scan:
                 row["echo_level_db"], row["echo_at_scan_m"] = echo_at(audio, echoes.emitted, scan_depth, echoes.fs)
                 row["depth_m"] = pred.depth_m if abs(pred.depth_m - scan_depth) < 0.1 else row["echo_at_scan_m"]
+                # The specular echo comes from the foot of the perpendicular: only where it falls in
+                # the hole does the echo speak of the hole (else of the wall beside it).
+                foot = pose.emitter - scan_depth * n
+                row["foot_in_hole"] = bool(hole.contains(foot[None], -0.05)[0])
             else:
                 row["depth_m"] = pred.depth_m
             row["offset_m"] = row["depth_m"] - float(n @ pose.emitter)
@@ -449,10 +467,12 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, classifier=None
         p_mirror = float(np.mean([r["p_mirror"] for r in rows]))
         evidence = {}
         if use_scan:
-            level = float(np.median([r["echo_level_db"] for r in rows]))
-            p_echo = 1 / (1 + np.exp(-(level - ECHO_CLOSED_DB) / 1.5))
-            p_closed = float(1 / (1 + np.exp(-(_logit(p_closed) + _logit(p_echo)))))
-            evidence["echo_level_db"] = level
+            levels = [r["echo_level_db"] for r in rows if r["foot_in_hole"]]
+            if levels:
+                level = float(np.median(levels))
+                p_echo = 1 / (1 + np.exp(-(level - ECHO_CLOSED_DB) / ECHO_SLOPE_DB))
+                p_closed = float(1 / (1 + np.exp(-(_logit(p_closed) + _logit(p_echo)))))
+                evidence.update(echo_level_db=level, echo_frames=len(levels))
             if mesh is not None:
                 share, count = mirror_evidence(mesh, hole, walls, np.array([v.pose[:3, 3] for v in views]))
                 evidence.update(mirrored_share=share, seen_through_vertices=count)

@@ -113,9 +113,24 @@ def phantom_area_m2(scene: Scene, mesh, world: World | None = None, density_per_
     return float(np.sum(_distance(world._rc, pts) > PHANTOM_M)) / density_per_m2
 
 
+def _finite(mesh):
+    """A copy without the triangles that touch a non-finite vertex (generic fillers make some)."""
+    import copy
+
+    v = np.asarray(mesh.vertices)
+    bad = ~np.all(np.isfinite(v), axis=1)
+    if not bad.any():
+        return mesh
+    out = copy.deepcopy(mesh)
+    out.remove_triangles_by_mask(bad[np.asarray(mesh.triangles)].any(axis=1))
+    out.remove_unreferenced_vertices()
+    return out
+
+
 def score(scene: Scene, initial, mesh, world: World | None = None, n_chamfer: int = 40_000) -> dict:
     """The metrics of the module's docstring for ``mesh``, a repair of the scan ``initial``."""
     world = World(scene) if world is None else world
+    initial, mesh = _finite(initial), _finite(mesh)
     fp = scene.room.footprint
     box = (np.r_[fp.min(axis=0) - 1.0, -1.0], np.r_[fp.max(axis=0) + 1.0, scene.room.height_m + 1.0])
     added = added_surface(initial, mesh, box)
