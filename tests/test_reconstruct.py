@@ -63,6 +63,17 @@ def test_walkthrough_needs_a_path():
         walkthrough(scene)
 
 
+def test_fusion_skips_frames_without_depth_and_says_when_none_has_any(scan):
+    from vrecho.render import View
+
+    scene, vertices, views = scan
+    blank = View(np.zeros_like(views[0].gray), np.zeros_like(views[0].depth), views[0].intrinsics, views[0].pose)
+    mesh = fuse([blank, views[0], views[1], blank], voxel_m=0.06)  # open3d alone aborts on a frame with no depth
+    assert len(mesh.triangles) > 100
+    with pytest.raises(VrechoError, match="no frame has a depth"):
+        fuse([blank, blank])
+
+
 def test_holes_in_the_walls_are_the_glass_opening_and_mirror(scan):
     from vrecho.reconstruct import holes, wall_planes
 

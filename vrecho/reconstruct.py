@@ -75,7 +75,11 @@ def fuse(views: list[View], voxel_m: float = 0.03, trunc_voxels: float = 4.0, we
                                          block_resolution=16, block_count=50_000, device=device)
     from tqdm import tqdm
 
+    used = 0
     for view in tqdm(views, desc="fuse (TSDF)", unit="frame", disable=not progress):
+        if not np.any((view.depth > 0) & (view.depth <= DEPTH_MAX_M)):
+            continue  # nothing in range (clear glass up close, the sky): open3d would abort
+        used += 1
         intrinsic = o3c.Tensor(view.intrinsics, o3c.float64)
         extrinsic = o3c.Tensor(np.linalg.inv(view.pose), o3c.float64)  # world-to-camera
         depth = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(view.depth, np.float32)))
@@ -84,6 +88,8 @@ def fuse(views: list[View], voxel_m: float = 0.03, trunc_voxels: float = 4.0, we
         blocks = grid.compute_unique_block_coordinates(depth, intrinsic, extrinsic, 1.0, DEPTH_MAX_M,
                                                        trunc_voxels)
         grid.integrate(blocks, depth, color, intrinsic, intrinsic, extrinsic, 1.0, DEPTH_MAX_M, trunc_voxels)
+    if not used:
+        raise VrechoError("fuse: no frame has a depth reading in range")
     return grid.extract_triangle_mesh(weight_threshold=weight_threshold).to_legacy()
 
 
