@@ -114,11 +114,13 @@ def phantom_area_m2(scene: Scene, mesh, world: World | None = None, density_per_
 
 
 def _finite(mesh):
-    """A copy without the triangles that touch a non-finite vertex (generic fillers make some)."""
+    """A copy without the triangles that touch a non-finite vertex or one more than 10 km away
+    (open3d's ``fill_holes`` makes both)."""
     import copy
 
     v = np.asarray(mesh.vertices)
-    bad = ~np.all(np.isfinite(v), axis=1)
+    with np.errstate(invalid="ignore"):
+        bad = ~np.all(np.isfinite(v) & (np.abs(v) < 1e4), axis=1)
     if not bad.any():
         return mesh
     out = copy.deepcopy(mesh)
