@@ -18,13 +18,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .errors import VrechoError
-from .render import DEPTH_MAX_M, Camera, View, World, camera_pose, render_view
+from .render import DEPTH_MAX_M, Camera, View, World, camera_pose, project, render_view
 from .scene import MIC_ABOVE_EMITTER_M, DevicePose, Scene, distance_to_polygon, point_in_polygon, signed_area
 from .signals import FS, probe
 
@@ -113,6 +114,17 @@ class Plane:
         along = np.cross(self.normal, up)
         return along / np.linalg.norm(along), up
 
+    def to_wall(self, points: np.ndarray) -> np.ndarray:
+        """Wall coordinates (N, 2) (along, up; see :meth:`frame`) of world points (N, 3)."""
+        return np.atleast_2d(points) @ np.stack(self.frame(), axis=1)
+
+    def to_world(self, uz: np.ndarray, offset: float | None = None) -> np.ndarray:
+        """World points (N, 3) of wall coordinates (N, 2), on the plane (or at another ``offset``)."""
+        along, up = self.frame()
+        offset = self.offset if offset is None else offset
+        uz = np.atleast_2d(uz)
+        return -offset * self.normal + uz[:, :1] * along + uz[:, 1:] * up
+
 
 @dataclass
 class Hole:
@@ -132,30 +144,18 @@ class Hole:
     def z(self) -> tuple[float, float]:
         return float(self.outline[:, 1].min()), float(self.outline[:, 1].max())
 
-    def to_world(self, uz: np.ndarray, offset: float | None = None) -> np.ndarray:
-        """World points (N, 3) of wall coordinates (N, 2), on the plane (or at another ``offset``)."""
-        along, up = self.plane.frame()
-        offset = self.plane.offset if offset is None else offset
-        uz = np.atleast_2d(uz)
-        return -offset * self.plane.normal + uz[:, :1] * along + uz[:, 1:] * up
-
-    def to_wall(self, points: np.ndarray) -> np.ndarray:
-        """Wall coordinates (N, 2) of world points (N, 3)."""
-        along, up = self.plane.frame()
-        return np.stack([points @ along, points @ up], axis=1)
-
     def corners(self) -> np.ndarray:
         """Bounding rectangle (4, 3), wound like the scene's walls: (u0, z0), (u1, z0), (u1, z1), (u0, z1)."""
         (u0, u1), (z0, z1) = self.u, self.z
-        return self.to_world(np.array([[u0, z0], [u1, z0], [u1, z1], [u0, z1]]))
+        return self.plane.to_world(np.array([[u0, z0], [u1, z0], [u1, z1], [u0, z1]]))
 
     def polygon(self, offset: float | None = None) -> np.ndarray:
         """The outline in world coordinates (K, 3)."""
-        return self.to_world(self.outline, offset)
+        return self.plane.to_world(self.outline, offset)
 
     def contains(self, points: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
         """Whether world points project into the outline (convex; widened by about ``margin_m``)."""
-        uz = self.to_wall(np.atleast_2d(points))
+        uz = self.plane.to_wall(points)
         a = self.outline
         e = np.roll(a, -1, axis=0) - a
         e = e / np.linalg.norm(e, axis=1, keepdims=True)
@@ -214,7 +214,7 @@ def wall_planes(vertices: np.ndarray, cameras: np.ndarray, distance_m: float = 0
 
 def _density(p: Plane) -> float:
     """Inliers per square metre of the plane's extent (5th to 95th percentile)."""
-    uz = p.inliers @ np.stack(p.frame(), axis=1)
+    uz = p.to_wall(p.inliers)
     lo, hi = np.percentile(uz, [5, 95], axis=0)
     return 0.9 * len(p.inliers) / max(float(np.prod(hi - lo)), 1e-3)
 
@@ -229,9 +229,8 @@ def _occluded(points: np.ndarray, q: Plane, centre: np.ndarray) -> np.ndarray:
         return out
     t = dc / (dc - dp[crosses])
     x = centre + t[:, None] * (points[crosses] - centre)
-    axes = np.stack(q.frame(), axis=1)
-    lo, hi = np.percentile(q.inliers @ axes, [5, 95], axis=0)
-    uz = x @ axes
+    lo, hi = np.percentile(q.to_wall(q.inliers), [5, 95], axis=0)
+    uz = q.to_wall(x)
     out[crosses] = np.all((uz >= lo) & (uz <= hi), axis=1)
     return out
 
@@ -264,13 +263,11 @@ def holes(plane: Plane, views: list[View], walls: list[Plane] = (), cell_m: floa
     from scipy import ndimage
     from scipy.spatial import ConvexHull
 
-    along, up = plane.frame()
-    uz = np.stack([plane.inliers @ along, plane.inliers @ up], axis=1)
+    uz = plane.to_wall(plane.inliers)
     lo, hi = uz.min(axis=0) - 0.3, uz.max(axis=0) + 0.3
     shape = tuple(np.ceil((hi - lo) / cell_m).astype(int))
     iu, iz = np.meshgrid(np.arange(shape[0]), np.arange(shape[1]), indexing="ij")
-    centres_uz = lo + cell_m * (np.stack([iu.ravel(), iz.ravel()], axis=1) + 0.5)
-    centres = -plane.offset * plane.normal + centres_uz[:, :1] * along + centres_uz[:, 1:] * up
+    centres = plane.to_world(lo + cell_m * (np.stack([iu.ravel(), iz.ravel()], axis=1) + 0.5))
     in_room = np.ones(len(centres), bool)
     for other in walls:
         if other is not plane:
@@ -278,13 +275,9 @@ def holes(plane: Plane, views: list[View], walls: list[Plane] = (), cell_m: floa
     through = np.zeros(len(centres), np.int32)
     wall = np.zeros(len(centres), np.int32)
     for view in views:
-        cam = (centres - view.pose[:3, 3]) @ view.pose[:3, :3]
-        z = cam[:, 2]
-        K = view.intrinsics
+        col, row, z = project(view, centres)
+        col, row = np.round(col), np.round(row)
         h, w = view.depth.shape
-        with np.errstate(divide="ignore", invalid="ignore"):
-            col = np.round(K[0, 0] * cam[:, 0] / z + K[0, 2])
-            row = np.round(K[1, 1] * cam[:, 1] / z + K[1, 2])
         ok = (z > 0.1) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
         d = np.full(len(z), -1.0)
         d[ok] = view.depth[row[ok].astype(int), col[ok].astype(int)]
@@ -441,6 +434,7 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, classifier=None
     from .render import crop_view
 
     classifier = load_classifier() if classifier is None else classifier
+    cameras = np.array([v.pose[:3, 3] for v in views])
     out = []
     for hole in holes_:
         n = hole.plane.normal
@@ -480,7 +474,7 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, classifier=None
                 p_closed = float(1 / (1 + np.exp(-(_logit(p_closed) + _logit(p_echo)))))
                 evidence.update(echo_level_db=level, echo_frames=len(levels))
             if mesh is not None:
-                share, count = mirror_evidence(mesh, hole, walls, np.array([v.pose[:3, 3] for v in views]))
+                share, count = mirror_evidence(mesh, hole, walls, cameras)
                 evidence.update(mirrored_share=share, seen_through_vertices=count)
                 if count >= 200:  # enough seen through to judge
                     p_mirror = 0.97 if share >= MIRROR_SHARE else 0.03
@@ -501,13 +495,14 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, classifier=None
 def match_truth(scene: Scene, hole: Hole, max_offset_m: float = 0.15) -> int | None:
     """The scene's discontinuity a hole belongs to (largest overlap on the same wall), or None."""
     best, best_area = None, 0.0
+    polygon = hole.polygon()
     for k, d in enumerate(scene.discontinuities):
         origin, u, normal = scene.room.wall_frame(d.wall)
         if hole.plane.normal @ normal > -np.cos(np.radians(10)):
             continue
-        if abs(np.mean((hole.polygon() - origin) @ normal)) > max_offset_m:
+        if abs(np.mean((polygon - origin) @ normal)) > max_offset_m:
             continue
-        uz = np.stack([(hole.polygon() - origin) @ u, hole.polygon()[:, 2]], axis=1)
+        uz = np.stack([(polygon - origin) @ u, polygon[:, 2]], axis=1)
         u0, u1, z0, z1 = d.bounds()
         du = max(0.0, min(u1, uz[:, 0].max()) - max(u0, uz[:, 0].min()))
         dz = max(0.0, min(z1, uz[:, 1].max()) - max(z0, uz[:, 1].min()))
@@ -583,11 +578,6 @@ def seen_through(points: np.ndarray, hole: Hole, cameras: np.ndarray, margin_m: 
     return out
 
 
-def phantom_triangles(mesh, hole: Hole, cameras: np.ndarray) -> np.ndarray:
-    """Triangles (bool mask) seen through a mirror's hole (:func:`seen_through`): its phantom room."""
-    return seen_through(np.asarray(mesh.vertices)[np.asarray(mesh.triangles)].mean(axis=1), hole, cameras)
-
-
 def mirror_evidence(mesh, hole: Hole, walls: list[Plane], cameras: np.ndarray, tolerance_m: float = 0.06) -> tuple[float, int]:
     """How much of what the camera saw through a hole is the room itself, mirrored.
 
@@ -654,13 +644,13 @@ def repair(mesh, holes_: list[Hole], decisions: list[Decision], cameras: np.ndar
                for _ in holes_]
     # Removals first, then fills (so a fill is never taken for a fragment).
     remove = np.zeros(len(out.triangles), bool)
+    centroids = np.asarray(out.vertices)[np.asarray(out.triangles)].mean(axis=1)
     for k, (hole, d) in enumerate(zip(holes_, decisions)):
-        if d.state == "closed" and d.material == "mirror":
-            ph = phantom_triangles(out, hole, cameras) & ~remove
+        if d.state == "closed" and d.material == "mirror":  # the phantom room seen through it
+            ph = seen_through(centroids, hole, cameras) & ~remove
             actions[k]["phantom_triangles_removed"] = int(ph.sum())
             remove |= ph
         elif d.state == "open":  # loose pieces floating in the opening
-            centroids = np.asarray(out.vertices)[np.asarray(out.triangles)].mean(axis=1)
             near = np.abs(centroids @ hole.plane.normal + hole.plane.offset) < 0.1
             frag = near & hole.contains(centroids) & ~remove
             actions[k]["fragment_triangles_removed"] = int(frag.sum())
@@ -683,11 +673,11 @@ def repair(mesh, holes_: list[Hole], decisions: list[Decision], cameras: np.ndar
         rim = None
         if variant == "per_vertex":
             near = np.abs(verts @ n + hole.plane.offset) < 0.05
-            uz = hole.to_wall(verts[near])
+            uz = hole.plane.to_wall(verts[near])
             close = distance_to_polygon(uz, hole.outline) <= rim_m
             idx = np.flatnonzero(near)[close & ~point_in_polygon(uz, hole.outline)]
             if len(idx) >= 3:
-                rim = idx[ConvexHull(hole.to_wall(verts[idx])).vertices]
+                rim = idx[ConvexHull(hole.plane.to_wall(verts[idx])).vertices]
         if rim is None:  # simplified (or too few rim vertices: recorded)
             ring = np.arange(len(verts), len(verts) + len(hole.outline))
             verts = np.vstack([verts, hole.polygon(offset)])
@@ -803,8 +793,7 @@ def scan_scene(scene: Scene, n_frames: int = 60, camera: Camera = Camera(), voxe
     from .scene import walkthrough_path
 
     if scene.camera_path is None:
-        scene = Scene(scene.name, scene.room, scene.discontinuities, scene.poses, scene.sources,
-                      walkthrough_path(scene), scene.mic_array, scene.emitter_p)
+        scene = dataclasses.replace(scene, camera_path=walkthrough_path(scene))
     views = walkthrough(scene, n_frames, camera, progress)
     return Scan(views, fuse(views, voxel_m, progress=progress))
 
@@ -837,10 +826,7 @@ class Reconstruction:
                                     "offset_m": None if d.offset_m is None else round(d.offset_m, 4),
                                     "p_closed": round(d.p_closed, 4), "p_mirror": round(d.p_mirror, 4),
                                     "confidence": round(d.confidence, 4), "source": d.source,
-                                    "frames": [{k2: (round(v, 4) if isinstance(v, float) else v) for k2, v in r.items()}
-                                               for r in d.frames],
-                                    "evidence": {k2: (round(v, 4) if isinstance(v, float) else v)
-                                                 for k2, v in d.evidence.items()}},
+                                    "frames": [_rounded(r) for r in d.frames], "evidence": _rounded(d.evidence)},
                        "action": a}
                       for k, (h, d, a) in enumerate(zip(self.holes, self.decisions, self.actions))],
             "surfaces": [{"hole": s.hole, "material": s.material, "area_m2": round(s.area_m2, 3),
@@ -848,6 +834,10 @@ class Reconstruction:
                           "confidence": round(s.confidence, 4)} for s in self.surfaces],
             "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
         }
+
+
+def _rounded(d: dict) -> dict:
+    return {k: round(v, 4) if isinstance(v, float) else v for k, v in d.items()}
 
 
 LABELS = ("echocnn", "echocnn-only", "oracle")

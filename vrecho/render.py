@@ -309,17 +309,22 @@ def crop_view(view: View, corners: np.ndarray, shape: tuple[int, int] = CROP_SHA
     """
     from scipy.ndimage import map_coordinates
 
-    cam = (_crop_grid(np.asarray(corners, float), shape, margin) - view.pose[:3, 3]) @ view.pose[:3, :3]
+    col, row, z = project(view, _crop_grid(np.asarray(corners, float), shape, margin))
+    h, w = view.gray.shape
+    ok = (z > 1e-3) & (col >= 0) & (col <= w - 1) & (row >= 0) & (row <= h - 1)
+    gray = np.zeros(len(z))
+    gray[ok] = map_coordinates(view.gray.astype(np.float64), [row[ok], col[ok]], order=1)
+    return np.round(255 * np.clip(gray, 0, 1).reshape(shape)).astype(np.uint8), float(ok.mean())
+
+
+def project(view: View, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pixel column, row (floats) and z-depth (metres) of world points (N, 3) in a frame; points
+    behind the camera get meaningless pixels (check ``z``)."""
+    cam = (np.asarray(points, float) - view.pose[:3, 3]) @ view.pose[:3, :3]
     z = cam[:, 2]
     K = view.intrinsics
     with np.errstate(divide="ignore", invalid="ignore"):
-        col = K[0, 0] * cam[:, 0] / z + K[0, 2]
-        row = K[1, 1] * cam[:, 1] / z + K[1, 2]
-    h, w = view.gray.shape
-    ok = (z > 1e-3) & (col >= 0) & (col <= w - 1) & (row >= 0) & (row <= h - 1)
-    gray = np.zeros(len(cam))
-    gray[ok] = map_coordinates(view.gray.astype(np.float64), [row[ok], col[ok]], order=1)
-    return np.round(255 * np.clip(gray, 0, 1).reshape(shape)).astype(np.uint8), float(ok.mean())
+        return K[0, 0] * cam[:, 0] / z + K[0, 2], K[1, 1] * cam[:, 1] / z + K[1, 2], z
 
 
 def _crop_grid(c: np.ndarray, shape: tuple[int, int], margin: float) -> np.ndarray:

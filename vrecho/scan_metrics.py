@@ -71,7 +71,8 @@ def sample_surface(mesh, density_per_m2: float, seed: int = 0) -> np.ndarray:
     return (1 - s)[:, None] * a[idx] + (s * (1 - r2))[:, None] * b[idx] + (s * r2)[:, None] * c[idx]
 
 
-def _sample_polygons(polygons: list[np.ndarray], density_per_m2: float, seed: int = 0) -> np.ndarray:
+def _sample_polygons(polygons: list[np.ndarray], n: int, seed: int = 0) -> np.ndarray:
+    """About ``n`` points spread uniformly over planar polygons (K, 3)."""
     import open3d as o3d
 
     verts, tris = [], []
@@ -80,7 +81,7 @@ def _sample_polygons(polygons: list[np.ndarray], density_per_m2: float, seed: in
         verts.append(p)
     mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.vstack(verts)),
                                      o3d.utility.Vector3iVector(np.vstack(tris).astype(np.int32)))
-    return sample_surface(mesh, density_per_m2, seed)
+    return sample_surface(mesh, n / _area(mesh), seed)
 
 
 def added_surface(initial, mesh, near: tuple[np.ndarray, np.ndarray] | None = None,
@@ -161,10 +162,7 @@ def score(scene: Scene, initial, mesh, world: World | None = None, n_chamfer: in
         if inside.sum() > 10:
             depth_errors.append(100 * float(np.median(np.abs(off[inside]))))
     shell = [p.corners for p in scene.patches() if p.kind != "open"]
-    truth_pts = _sample_polygons(shell, 1.0)
-    truth_pts = truth_pts[np.random.default_rng(2).permutation(len(truth_pts))[:n_chamfer]] if len(truth_pts) > n_chamfer \
-        else _sample_polygons(shell, n_chamfer / sum(0.5 * np.linalg.norm(np.cross(p[1:-1] - p[0], p[2:] - p[0]), axis=1).sum()
-                                                     for p in shell), 2)
+    truth_pts = _sample_polygons(shell, n_chamfer, seed=2)
     mesh_pts = sample_surface(mesh, n_chamfer / max(mesh.get_surface_area(), 1e-9), seed=3)
     chamfer = 0.5 * (_distance(world._rc, mesh_pts).mean() + _distance(_rc(mesh), truth_pts).mean())
     phantom0 = phantom_area_m2(scene, initial, world)
