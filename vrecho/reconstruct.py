@@ -190,7 +190,7 @@ def wall_planes(vertices: np.ndarray, cameras: np.ndarray, distance_m: float = 0
         rest = np.delete(rest, idx, axis=0)
     # RANSAC also strings scattered points (the outdoors, seen in pieces) into planes: a wall is
     # a dense surface, at least a tenth as dense as the densest plane found.
-    vertical = [p for p in found if p.vertical]
+    vertical = [_dense_part(p) for p in found if p.vertical]
     density = [_density(p) for p in vertical]
     vertical = [p for p, rho in zip(vertical, density) if rho >= 0.1 * max(density, default=0.0)]
     # What is seen only through another plane (the outside's facades through a window, a mirror's
@@ -205,11 +205,34 @@ def wall_planes(vertices: np.ndarray, cameras: np.ndarray, distance_m: float = 0
                 keep &= ~_occluded(p.inliers, q, centre)
         if keep.sum() >= max(3, min_share * len(vertices)):
             direct.append(_vertical_fit(p.inliers[keep], centre))
+    # The nearest plane in each direction is the wall, unless it is a remnant much smaller than
+    # another plane facing the same way (a facade outside, seen above a wall's scanned extent).
     walls = []
     for p in sorted(direct, key=lambda p: p.normal @ centre + p.offset):
+        same = [q for q in direct if p.normal @ q.normal >= np.cos(np.radians(10))]
+        if len(p.inliers) < 0.25 * max(len(q.inliers) for q in same):
+            continue
         if all(p.normal @ w.normal < np.cos(np.radians(10)) for w in walls):
             walls.append(p)
     return walls
+
+
+def _dense_part(p: Plane, cell_m: float = 0.1, share: float = 0.25) -> Plane:
+    """The plane's inliers in its large connected pieces (10 cm cells, pieces of at least a
+    quarter of the largest's area): RANSAC's plane also takes thin strips of other surfaces
+    that cross it, which would stretch the wall's extent across the room."""
+    from scipy import ndimage
+
+    cells = np.floor(p.to_wall(p.inliers) / cell_m).astype(int)
+    cells -= cells.min(axis=0)
+    grid = np.zeros(cells.max(axis=0) + 1, bool)
+    grid[cells[:, 0], cells[:, 1]] = True
+    labels, n = ndimage.label(grid, structure=np.ones((3, 3)))
+    if n <= 1:
+        return p
+    area = np.bincount(labels.ravel())[1:]
+    keep = np.r_[False, area >= share * area.max()]
+    return Plane(p.normal, p.offset, p.inliers[keep[labels[cells[:, 0], cells[:, 1]]]])
 
 
 def _density(p: Plane) -> float:
@@ -251,7 +274,8 @@ def holes(plane: Plane, views: list[View], walls: list[Plane] = (), cell_m: floa
           margin_m: float = 0.1) -> list[Hole]:
     """Regions of a wall plane that the depth camera saw through.
 
-    A raster of ``cell_m`` cells over the plane's extent (its inliers, widened by 0.3 m) is
+    A raster of ``cell_m`` cells over the plane's extent (its inliers, widened by 0.3 m up and
+    down: the path may not look at a wall's bottom or top; not sideways, where it ends) is
     judged frame by frame: where a frame's depth reading at a cell lies beyond the cell (or is
     missing: clear glass, or nothing in range), the frame saw through it; where it agrees with
     the cell, it saw the wall; where it lies in front, something hid the cell. A cell is empty
@@ -264,7 +288,7 @@ def holes(plane: Plane, views: list[View], walls: list[Plane] = (), cell_m: floa
     from scipy.spatial import ConvexHull
 
     uz = plane.to_wall(plane.inliers)
-    lo, hi = uz.min(axis=0) - 0.3, uz.max(axis=0) + 0.3
+    lo, hi = uz.min(axis=0) - [0.0, 0.3], uz.max(axis=0) + [0.0, 0.3]
     shape = tuple(np.ceil((hi - lo) / cell_m).astype(int))
     iu, iz = np.meshgrid(np.arange(shape[0]), np.arange(shape[1]), indexing="ij")
     centres = plane.to_world(lo + cell_m * (np.stack([iu.ravel(), iz.ravel()], axis=1) + 0.5))

@@ -99,8 +99,11 @@ class World:
         for _ in range(int(rng.integers(8, 14))):
             ang = rng.uniform(0, 2 * np.pi)
             dist = rng.uniform(2.0, 14.0)
-            c = (lo + hi) / 2 + (np.linalg.norm(hi - lo) / 2 + dist) * np.array([np.cos(ang), np.sin(ang)])
+            way = np.array([np.cos(ang), np.sin(ang)])
+            c = (lo + hi) / 2 + (np.linalg.norm(hi - lo) / 2 + dist) * way
             size = np.r_[rng.uniform(1.0, 6.0, 2), rng.uniform(2.0, 12.0)]
+            while np.all(np.abs(c - (lo + hi) / 2) < (hi - lo) / 2 + size[:2] / 2 + 1.0):
+                c = c + 0.5 * way  # a building stands at least 1 m outside the room, never in it
             self._add_box(np.r_[c - size[:2] / 2, 0.0], np.r_[c + size[:2] / 2, size[2]], rng.uniform(0.3, 0.9),
                           int(rng.integers(4, 6)))
 

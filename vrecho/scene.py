@@ -795,24 +795,28 @@ def walkthrough_path(scene: Scene, distance_m: float = 1.6, height_m: float = 1.
     """A camera path around a room that looks at every wall, and squarely at each discontinuity.
 
     Keyframes in the footprint's order: ``distance_m`` in front of each discontinuity (or of the
-    middle of a wall without one), looking at its centre; pulled in where the room is too
-    narrow. What a person scanning the room would do; the scenes of :func:`random_scene` have no
-    path of their own.
+    middle of a wall without one), looking at its centre, then tilting down to its foot and up
+    to its top where they lie beyond the band a camera holds from there (about 0.9 to 2.1 m
+    high); pulled in where
+    the room is too narrow. What a person scanning the room would do; the scenes of
+    :func:`random_scene` have no path of their own.
     """
     room = scene.room
     positions, targets = [], []
     for w, length in enumerate(room.wall_lengths):
         origin, u, normal = room.wall_frame(w)
         ds = sorted((d for d in scene.discontinuities if d.wall == w), key=lambda d: d.center_u_m)
-        looks = [(d.center_u_m, np.clip(d.center_z_m, 0.8, 1.8)) for d in ds] or [(length / 2, 1.3)]
-        for u_m, z_m in looks:
-            target = origin + u_m * u + np.array([0, 0, z_m])
+        looks = [(d.center_u_m, d.bounds()[2:]) for d in ds] or [(length / 2, (1.0, 1.6))]
+        for u_m, (z0, z1) in looks:
+            centre = origin + u_m * u
             for dist in np.linspace(distance_m, 0.6, 11):
-                pos = np.r_[(target - dist * normal)[:2], height_m]
+                pos = np.r_[(centre - dist * normal)[:2], height_m]
                 if room.contains(pos[None], margin_m=0.4)[0]:
                     break
-            positions.append(pos)
-            targets.append(target)
+            tilts = [z for z, beyond in ((z0 + 0.3, z0 < 0.9), (z1 - 0.3, z1 > 2.1)) if beyond]
+            for z_m in [np.clip((z0 + z1) / 2, 0.8, 1.8)] + tilts:
+                positions.append(pos)
+                targets.append(centre + np.array([0.0, 0.0, z_m]))
     positions.append(positions[0])
     targets.append(targets[0])
     return CameraPath(np.round(positions, 3), np.round(targets, 3), duration_s)
