@@ -9,6 +9,8 @@ from vrecho.errors import VrechoError
 from vrecho.reconstruct import fuse, walkthrough
 from vrecho.render import Camera
 
+from conftest import small_room
+
 
 @pytest.fixture(scope="module")
 def scan():
@@ -111,26 +113,11 @@ def test_geometry_beyond_the_walls_is_found(scan):
 
 # -- The repair (Algorithm 1) on a small room: one window, one mirror, one opening ---------------
 
-def _small_room():
-    from vrecho.scene import Scene
-
-    wall = {"name": "plasterboard", "absorption": [0.15, 0.1, 0.06, 0.04, 0.04, 0.05, 0.05], "scattering": 0.1}
-    floor = {"name": "carpet", "absorption": [0.05, 0.1, 0.2, 0.35, 0.5, 0.6, 0.6], "scattering": 0.1}
-    return Scene.from_dict({
-        "format": "vrecho-scene", "version": 1, "name": "small_room", "emitter_p": 0.7,
-        "room": {"footprint": [[0, 0], [4.2, 0], [4.2, 3.6], [0, 3.6]], "height_m": 2.5,
-                 "walls": [wall] * 4, "floor": floor, "ceiling": wall},
-        "discontinuities": [
-            {"wall": 0, "center_u_m": 2.1, "center_z_m": 1.4, "width_m": 1.2, "height_m": 1.0, "kind": "glass"},
-            {"wall": 1, "center_u_m": 1.8, "center_z_m": 1.3, "width_m": 0.9, "height_m": 1.2, "kind": "mirror"},
-            {"wall": 2, "center_u_m": 2.1, "center_z_m": 1.4, "width_m": 1.0, "height_m": 1.0, "kind": "open"}]})
-
-
 @pytest.fixture(scope="module")
 def small():
     from vrecho.reconstruct import reconstruct, scan_scene
 
-    scene = _small_room()
+    scene = small_room()
     scan = scan_scene(scene, 36, Camera(200, 150), voxel_m=0.04)
     return scene, scan, reconstruct(scan, scene, "echocnn")
 
@@ -209,3 +196,24 @@ def test_reconstruct_command_answers_bad_input_with_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "neither" in err[0]
     assert not (tmp_path / "o").exists()
+
+
+def test_the_repair_exports_to_usd(small, tmp_path):
+    """The repaired small room as OpenUSD: the fills are their own prims (not also in the room
+    mesh), the opening is kept with its labels, and OpenUSD's validators find nothing."""
+    from pxr import Usd
+
+    import usd_export
+    from localization import PlacedSource
+
+    scene, scan, result = small
+    room, surfaces = usd_export.from_reconstruction(result)
+    added = sum(len(s.triangles) for s in result.surfaces)
+    assert added > 0 and len(room[1]) == len(result.repaired.triangles) - added
+    assert sorted(s.state for s in surfaces) == ["closed", "closed", "open"]
+    source = PlacedSource(np.array([2.0, 1.8, 1.2]), np.sin(np.arange(44100) / 9.0), 44100, 0.9, "hum")
+    path = usd_export.write_scene(tmp_path / "small.usdc", room, surfaces, [source])
+    assert usd_export.validate(path) == []
+    stage = Usd.Stage.Open(str(path))
+    assert len(stage.GetPrimAtPath("/World/Surfaces").GetChildren()) == 3
+    assert [p.GetName() for p in stage.GetPrimAtPath("/World/Sources").GetChildren()] == ["hum"]

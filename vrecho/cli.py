@@ -63,6 +63,34 @@ def _reconstruct(args) -> int:
     return 0
 
 
+def _export(args) -> int:
+    import usd_export
+
+    from .reconstruct import open_source, reconstruct
+
+    usd_export.check_target(args.out)  # before the work, not after
+    if args.sources not in ("none", "truth") and not Path(args.sources).is_file():
+        raise VrechoError(f"sources: expected 'none', 'truth' or a JSON file, got {args.sources!r}")
+    scan, scene = open_source(args.scene, args.frames, progress=not args.quiet)
+    if args.sources == "truth" and scene is None:
+        raise VrechoError("sources: 'truth' needs a scene (builtin or a scene JSON), not a scan folder")
+    result = reconstruct(scan, scene, args.labels, args.variant, seed=args.seed, progress=not args.quiet)
+    room, surfaces = usd_export.from_reconstruction(result)
+    sources = {"none": lambda: [], "truth": lambda: usd_export.sources_from_scene(scene)}.get(
+        args.sources, lambda: usd_export.sources_from_json(args.sources))()
+    path = usd_export.write_scene(args.out, room, surfaces, sources)  # refuses a stage with validation errors
+    problems = usd_export.validate(path)
+    errors = [p for p in problems if p.severity == "error"]
+    if errors:  # write_scene checked before moving it into place; this is the file on disk
+        raise VrechoError(f"export: {path} has {len(errors)} validation error(s); first: {errors[0]}")
+    for p in problems:
+        print(f"  {p}")
+    print(f"{path}: {len(room[1]):,} room triangles, {len(surfaces)} surfaces "
+          f"({', '.join(f'{s.name} {s.state}' for s in surfaces) or 'none'}), {len(sources)} sound sources; "
+          f"OpenUSD's validators: no errors, {len(problems)} other findings")
+    return 0
+
+
 def _demo(args) -> int:
     from .listen import run_demo
 
@@ -127,6 +155,25 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--save-scan", action="store_true", help="also write the scan (OUT/scan, the scan-folder format)")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
     r.set_defaults(func=_reconstruct)
+
+    x = sub.add_parser("export", help="reconstruct and repair a scene, and write it as OpenUSD (.usda/.usdc/.usdz)",
+                       description="The repaired room as an OpenUSD stage: the mesh, each glass, mirror and opening "
+                                   "with vrecho's labels, materials, and the sound sources as spatial audio (WAVs "
+                                   "beside a .usda, inside a .usdz). Refuses to succeed while OpenUSD's validators "
+                                   "report an error; a failed export writes nothing.")
+    x.add_argument("scene", help="'builtin', a scene JSON file, or a scan folder (as for reconstruct)")
+    x.add_argument("--out", required=True, type=Path, help="the stage: a .usda, .usdc, .usd or .usdz path")
+    x.add_argument("--labels", choices=("echocnn", "echocnn-only", "oracle"), default="echocnn",
+                   help="who decides what each hole is (as for reconstruct; default: echocnn)")
+    x.add_argument("--variant", choices=("simplified", "per_vertex"), default="simplified",
+                   help="Algorithm 1's fill (default: simplified)")
+    x.add_argument("--sources", default="none",
+                   help="sound sources: 'none' (default), 'truth' (a scene's own sources where they are) or a "
+                        "JSON file of placed sources (see usd_export.sources_from_json)")
+    x.add_argument("--frames", type=int, default=60, help="walkthrough frames of a simulated scan (default: 60)")
+    x.add_argument("--seed", type=int, default=0, help="seed of the simulated recordings (default: 0)")
+    x.add_argument("--quiet", action="store_true", help="no progress bars")
+    x.set_defaults(func=_export)
 
     d = sub.add_parser("demo", help="run vrecho on its built-in living room",
                        description="Simulate the built-in scene (or --scene FILE): what the device hears in "

@@ -565,14 +565,15 @@ VARIANTS = ("simplified", "per_vertex")
 
 @dataclass
 class Surface:
-    """A surface the repair added: its ``polygon`` (K, 3, world), ``material``, the hole it fills
-    and the decision's confidence."""
+    """A surface the repair added: its ``polygon`` (K, 3, world), ``material``, the hole it fills,
+    the decision's confidence and its ``triangles`` (F, 3) in the repaired mesh."""
 
     hole: int
     material: str
     polygon: np.ndarray
     normal: np.ndarray
     confidence: float
+    triangles: np.ndarray
 
     @property
     def area_m2(self) -> float:
@@ -717,7 +718,7 @@ def repair(mesh, holes_: list[Hole], decisions: list[Decision], cameras: np.ndar
         tris.append(fan)
         actions[k].update(filled=True, fill="per_vertex" if rim is not None else "simplified",
                           fill_vertices=int(len(ring)))
-        surfaces.append(Surface(k, d.material or "wall", verts[ring].copy(), n.copy(), d.confidence))
+        surfaces.append(Surface(k, d.material or "wall", verts[ring].copy(), n.copy(), d.confidence, fan))
     out.vertices = o3d.utility.Vector3dVector(verts)
     out.vertex_colors = o3d.utility.Vector3dVector(cols)
     out.triangles = o3d.utility.Vector3iVector(np.vstack(tris).astype(np.int32))
@@ -964,6 +965,26 @@ def _below(mesh, z_max: float):
     return out
 
 
+def open_source(source: str | Path, n_frames: int = 60, progress: bool = False) -> tuple[Scan, Scene | None]:
+    """The scan named on the command line, and the scene's truth where there is one:
+    ``builtin`` (the living room) or a scene JSON file is scanned (``n_frames`` walkthrough
+    frames); a folder is a user's scan (:func:`load_scan`)."""
+    from .scene import builtin_scene, load_scene
+
+    if n_frames < 2:
+        raise VrechoError(f"frames: expected at least 2, got {n_frames}")
+    source = Path(source)
+    if str(source) == "builtin":
+        scene = builtin_scene()
+    elif source.is_dir():
+        return load_scan(source, progress=progress), None
+    elif source.is_file():
+        scene = load_scene(source)
+    else:
+        raise VrechoError(f"scene: {source} is neither 'builtin', a scene JSON file nor a scan folder")
+    return scan_scene(scene, n_frames, progress=progress), scene
+
+
 def run(source: str | Path, out: str | Path, labels: str = "echocnn", variant: str = "simplified",
         n_frames: int = 60, seed: int = 0, save_scan: bool = False, progress: bool = True) -> Reconstruction:
     """What ``vrecho reconstruct`` does: scan (or load) a scene, repair it, write the results.
@@ -979,24 +1000,11 @@ def run(source: str | Path, out: str | Path, labels: str = "echocnn", variant: s
     import open3d as o3d
 
     from .io import atomic_write_text, ensure_writable_dir
-    from .scene import builtin_scene, load_scene
 
     if labels not in LABELS:
         raise VrechoError(f"labels: expected one of {LABELS}, got {labels!r}")
-    if n_frames < 2:
-        raise VrechoError(f"frames: expected at least 2, got {n_frames}")
-    source = Path(source)
-    scene = None
-    if str(source) == "builtin":
-        scene = builtin_scene()
-    elif source.is_dir():
-        pass
-    elif source.is_file():
-        scene = load_scene(source)
-    else:
-        raise VrechoError(f"scene: {source} is neither 'builtin', a scene JSON file nor a scan folder")
     out = ensure_writable_dir(out)
-    scan = load_scan(source, progress=progress) if scene is None else scan_scene(scene, n_frames, progress=progress)
+    scan, scene = open_source(source, n_frames, progress)
     result = reconstruct(scan, scene, labels, variant, seed=seed, progress=progress)
     o3d.io.write_triangle_mesh(str(out / "initial.ply"), scan.mesh)
     o3d.io.write_triangle_mesh(str(out / "repaired.ply"), result.repaired)

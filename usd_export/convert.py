@@ -1,0 +1,81 @@
+"""From vrecho's reconstruction to what :func:`usd_export.write_scene` takes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .stage import LabeledSurface
+
+
+def from_reconstruction(result) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], list[LabeledSurface]]:
+    """The room mesh without the surfaces the repair added, and every discontinuity of a
+    :class:`vrecho.reconstruct.Reconstruction` as a :class:`LabeledSurface` (added surfaces with
+    their polygon, openings with the hole's outline). ``depth_m`` is the median distance the
+    listening frames gave (None for oracle labels)."""
+    mesh = result.repaired
+    vertices = np.asarray(mesh.vertices)
+    faces = np.asarray(mesh.triangles)
+    colours = np.asarray(mesh.vertex_colors) if mesh.has_vertex_colors() else np.full((len(vertices), 3), 0.6)
+    added = {tuple(t) for s in result.surfaces for t in s.triangles}
+    keep = np.array([tuple(t) not in added for t in faces], bool) if added else np.ones(len(faces), bool)
+    used = np.unique(faces[keep])
+    index = np.full(len(vertices), -1)
+    index[used] = np.arange(len(used))
+    room = (vertices[used], index[faces[keep]], colours[used])
+
+    filled = {s.hole: s for s in result.surfaces}
+    surfaces = []
+    for k, (hole, d) in enumerate(zip(result.holes, result.decisions)):
+        depths = [r["depth_m"] for r in d.frames if r.get("depth_m") is not None]
+        depth = float(np.median(depths)) if depths else None
+        if d.state == "closed" and k in filled:
+            s = filled[k]
+            surfaces.append(LabeledSurface(f"{s.material}_{k}", s.polygon, "closed", s.material, depth, d.confidence))
+        else:
+            polygon = hole.polygon()
+            n = np.cross(polygon[1] - polygon[0], polygon[2] - polygon[0])
+            if n @ hole.plane.normal < 0:  # face the room
+                polygon = polygon[::-1]
+            surfaces.append(LabeledSurface(f"opening_{k}", polygon, d.state, d.material if d.state == "closed" else None,
+                                           depth, d.confidence))
+    return room, surfaces
+
+
+def sources_from_scene(scene, seconds: int = 10) -> list:
+    """The scene's own sound sources at their true positions, each playing its sound (PROTOCOL's
+    100 ms sound once a second, at the source's gain): the truth, standing in where no
+    localization ran (``vrecho export --sources truth``)."""
+    from localization import PlacedSource
+    from vrecho.signals import FS, emitted_sound, pulse_train
+
+    out = []
+    for k, s in enumerate(scene.sources):
+        signal = pulse_train(emitted_sound(s.sound, FS, np.random.default_rng(k)), seconds) * 10 ** (s.gain_db / 20)
+        out.append(PlacedSource(np.asarray(s.position, float), signal, FS, 1.0, f"{s.sound}_{k}"))
+    return out
+
+
+def sources_from_json(path) -> list:
+    """Placed sources listed in a JSON file: ``[{"name", "position": [x, y, z] (metres, Z up),
+    "wav": path (relative to the file), "confidence"?, "uncertainty_m"?}, ...]``."""
+    import json
+    from pathlib import Path
+
+    from localization import PlacedSource
+    from vrecho.errors import VrechoError
+
+    path = Path(path)
+    try:
+        items = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise VrechoError(f"sources: cannot read {path} as JSON ({e})") from None
+    if not isinstance(items, list):
+        raise VrechoError(f"sources: {path} must hold a list of sources")
+    out = []
+    for i, d in enumerate(items):
+        if not isinstance(d, dict) or "position" not in d or "wav" not in d:
+            raise VrechoError(f"sources: {path} item {i} needs 'position' and 'wav'")
+        out.append(PlacedSource(np.asarray(d["position"], float), path.parent / d["wav"], 0,
+                                float(d.get("confidence", 1.0)), str(d.get("name", f"source_{i}")),
+                                d.get("uncertainty_m")))
+    return out
