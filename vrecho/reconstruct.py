@@ -80,14 +80,19 @@ def fuse(views: list[View], voxel_m: float = 0.03, trunc_voxels: float = 4.0, we
     for view in tqdm(views, desc="fuse (TSDF)", unit="frame", disable=not progress):
         if not np.any((view.depth > 0) & (view.depth <= DEPTH_MAX_M)):
             continue  # nothing in range (clear glass up close, the sky): open3d would abort
-        used += 1
         intrinsic = o3c.Tensor(view.intrinsics, o3c.float64)
         extrinsic = o3c.Tensor(np.linalg.inv(view.pose), o3c.float64)  # world-to-camera
         depth = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(view.depth, np.float32)))
         color = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(np.repeat(view.gray[..., None], 3, axis=2),
                                                                      np.float32)))
-        blocks = grid.compute_unique_block_coordinates(depth, intrinsic, extrinsic, 1.0, DEPTH_MAX_M,
-                                                       trunc_voxels)
+        try:
+            blocks = grid.compute_unique_block_coordinates(depth, intrinsic, extrinsic, 1.0, DEPTH_MAX_M,
+                                                           trunc_voxels)
+        except RuntimeError as e:  # a few stray readings that touch no voxel block
+            if "No block is touched" in str(e):
+                continue
+            raise
+        used += 1
         grid.integrate(blocks, depth, color, intrinsic, intrinsic, extrinsic, 1.0, DEPTH_MAX_M, trunc_voxels)
     if not used:
         raise VrechoError("fuse: no frame has a depth reading in range")
@@ -173,6 +178,9 @@ def wall_planes(vertices: np.ndarray, cameras: np.ndarray, distance_m: float = 0
 
     o3d.utility.random.seed(seed)
     rest = np.asarray(vertices, float)
+    # open3d's parallel TSDF extraction orders the same vertices differently run to run; RANSAC
+    # draws by index, so a canonical order makes the walls (and all that follows) repeatable.
+    rest = rest[np.lexsort(rest.T[::-1])]
     centre = np.asarray(cameras, float).mean(axis=0)
     found = []
     for _ in range(max_planes):
@@ -217,10 +225,11 @@ def wall_planes(vertices: np.ndarray, cameras: np.ndarray, distance_m: float = 0
     return walls
 
 
-def _dense_part(p: Plane, cell_m: float = 0.1, share: float = 0.25) -> Plane:
-    """The plane's inliers in its large connected pieces (10 cm cells, pieces of at least a
-    quarter of the largest's area): RANSAC's plane also takes thin strips of other surfaces
-    that cross it, which would stretch the wall's extent across the room."""
+def _dense_part(p: Plane, cell_m: float = 0.1, share: float = 0.25, min_side_m: float = 0.3) -> Plane:
+    """The plane's inliers in its connected pieces (10 cm cells) that are surfaces, not strips:
+    at least a quarter of the largest piece's area, or at least ``min_side_m`` wide and tall.
+    RANSAC's plane also takes thin strips of other surfaces that cross it, which would stretch
+    the wall's extent across the room; a wall's own pieces, parted where no frame looked, stay."""
     from scipy import ndimage
 
     cells = np.floor(p.to_wall(p.inliers) / cell_m).astype(int)
@@ -231,7 +240,8 @@ def _dense_part(p: Plane, cell_m: float = 0.1, share: float = 0.25) -> Plane:
     if n <= 1:
         return p
     area = np.bincount(labels.ravel())[1:]
-    keep = np.r_[False, area >= share * area.max()]
+    sides = np.array([[s.stop - s.start for s in sl] for sl in ndimage.find_objects(labels)]) * cell_m
+    keep = np.r_[False, (area >= share * area.max()) | np.all(sides >= min_side_m, axis=1)]
     return Plane(p.normal, p.offset, p.inliers[keep[labels[cells[:, 0], cells[:, 1]]]])
 
 
