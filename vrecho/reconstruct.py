@@ -222,7 +222,13 @@ def wall_planes(vertices: np.ndarray, cameras: np.ndarray, distance_m: float = 0
             continue
         if all(p.normal @ w.normal < np.cos(np.radians(10)) for w in walls):
             walls.append(p)
-    return walls
+    # RANSAC may take a wall in pieces (a door splits it): coplanar pieces are one wall.
+    merged = []
+    for w in walls:
+        pieces = [q.inliers for q in direct if q.normal @ w.normal >= np.cos(np.radians(10))
+                  and abs(np.median(q.inliers @ w.normal) + w.offset) < 0.06]
+        merged.append(_vertical_fit(np.vstack(pieces), centre) if len(pieces) > 1 else w)
+    return merged
 
 
 def _dense_part(p: Plane, cell_m: float = 0.1, share: float = 0.25, min_side_m: float = 0.3) -> Plane:
@@ -975,24 +981,31 @@ def _below(mesh, z_max: float):
     return out
 
 
-def open_source(source: str | Path, n_frames: int = 60, progress: bool = False) -> tuple[Scan, Scene | None]:
-    """The scan named on the command line, and the scene's truth where there is one:
-    ``builtin`` (the living room) or a scene JSON file is scanned (``n_frames`` walkthrough
-    frames); a folder is a user's scan (:func:`load_scan`)."""
+def resolve_source(source: str | Path) -> Scene | Path:
+    """What the command line names, checked before any work: ``builtin`` (the living room) or a
+    scene JSON file gives its :class:`Scene`; a folder is a user's scan (:func:`load_scan`)."""
     from .scene import builtin_scene, load_scene
 
-    if n_frames < 2:
-        raise VrechoError(f"frames: expected at least 2, got {n_frames}")
     source = Path(source)
     if str(source) == "builtin":
-        scene = builtin_scene()
-    elif source.is_dir():
+        return builtin_scene()
+    if source.is_dir():
+        return source
+    if source.is_file():
+        return load_scene(source)
+    raise VrechoError(f"scene: {source} is neither 'builtin', a scene JSON file nor a scan folder")
+
+
+def open_source(source: str | Path | Scene, n_frames: int = 60, progress: bool = False) -> tuple[Scan, Scene | None]:
+    """The scan of a source (see :func:`resolve_source`; a scene is scanned with ``n_frames``
+    walkthrough frames), and the scene's truth where there is one."""
+    if n_frames < 2:
+        raise VrechoError(f"frames: expected at least 2, got {n_frames}")
+    if not isinstance(source, Scene):
+        source = resolve_source(source)
+    if isinstance(source, Path):
         return load_scan(source, progress=progress), None
-    elif source.is_file():
-        scene = load_scene(source)
-    else:
-        raise VrechoError(f"scene: {source} is neither 'builtin', a scene JSON file nor a scan folder")
-    return scan_scene(scene, n_frames, progress=progress), scene
+    return scan_scene(source, n_frames, progress=progress), source
 
 
 def run(source: str | Path, out: str | Path, labels: str = "echocnn", variant: str = "simplified",
@@ -1013,8 +1026,11 @@ def run(source: str | Path, out: str | Path, labels: str = "echocnn", variant: s
 
     if labels not in LABELS:
         raise VrechoError(f"labels: expected one of {LABELS}, got {labels!r}")
+    if n_frames < 2:
+        raise VrechoError(f"frames: expected at least 2, got {n_frames}")
+    resolved = resolve_source(source)  # bad input answered before anything is written
     out = ensure_writable_dir(out)
-    scan, scene = open_source(source, n_frames, progress)
+    scan, scene = open_source(resolved, n_frames, progress)
     result = reconstruct(scan, scene, labels, variant, seed=seed, progress=progress)
     o3d.io.write_triangle_mesh(str(out / "initial.ply"), scan.mesh)
     o3d.io.write_triangle_mesh(str(out / "repaired.ply"), result.repaired)

@@ -1,0 +1,97 @@
+"""Simulated walks for the headset call: a wearer walks toward a surface while the device plays
+:class:`vrecho.boundary.BoundaryMonitor`'s probe; what its microphone records.
+
+Each probe pulse gets its own impulse response at the device's pose of that instant
+(pyroomacoustics' image sources up to second order: the specular echoes that ranging is about;
+the same room as the foundation's simulator, its glass, mirrors and openings as their own wall
+patches). The walk bobs the head (2 cm at 1.8 Hz) and sways it (3 degrees at 0.9 Hz); the audio
+stream has an output latency of 0 to 5 ms the monitor does not know; pink background noise 20
+to 40 dB below the direct sound and microphone self-noise are added as PROTOCOL.md says.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .acoustics import SPEED_OF_SOUND, Simulation, build_room
+from .errors import VrechoError
+from .scene import MIC_ABOVE_EMITTER_M, Scene
+from .signals import colored_noise
+
+WALK_SIMULATION = Simulation(max_order=2, n_rays=0, length_s=0.06, air_absorption=True)
+
+
+@dataclass
+class Walk:
+    """A walk's recording: ``mic`` (n,) at ``fs``; per pulse, ``pulse_times_s`` (emission, on the
+    stream's clock) and ``distance_m`` (the emitter's true distance to the target's plane)."""
+
+    mic: np.ndarray
+    fs: int
+    pulse_times_s: np.ndarray
+    distance_m: np.ndarray
+    latency_s: float
+
+
+def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: float, probe: np.ndarray,
+                  period_s: float, fs: int, rng: np.random.Generator, plane: tuple[np.ndarray, np.ndarray],
+                  stop_m: float = 0.15, snr_db: float | None = None, lead_s: float = 0.3) -> Walk:
+    """The microphone signal of a walk from ``start`` toward ``goal`` (emitter positions, metres)
+    at ``speed_mps``, stopping ``stop_m`` before the target's plane (``plane``: a point on it
+    and its unit normal). ``lead_s``: standing still at the start first."""
+    import pyroomacoustics as pra
+    from pyroomacoustics.directivities import CardioidFamily, DirectionVector
+
+    start, goal = np.asarray(start, float), np.asarray(goal, float)
+    p0, normal = np.asarray(plane[0], float), np.asarray(plane[1], float)
+    heading = goal - start
+    heading[2] = 0.0
+    heading /= np.linalg.norm(heading)
+    dist0 = abs((start - p0) @ normal)
+    along = abs(heading @ normal)
+    if along < 0.5:
+        raise VrechoError("walk: the heading must meet the target's plane within 60 degrees")
+    length = (dist0 - stop_m) / along
+    duration = lead_s + length / speed_mps
+    period = int(round(period_s * fs))
+    n_pulses = int(duration * fs) // period
+    latency = int(rng.integers(0, int(0.005 * fs)))
+    snr = float(rng.uniform(20, 40)) if snr_db is None else snr_db
+    bob_phase, sway_phase = rng.uniform(0, 2 * np.pi, 2)
+    lag = pra.constants.get("frac_delay_length") // 2
+    n_ir = int(WALK_SIMULATION.length_s * fs)
+    total = n_pulses * period + n_ir + len(probe) + latency
+    x = np.zeros(total)
+    times, dists = np.zeros(n_pulses), np.zeros(n_pulses)
+    for k in range(n_pulses):
+        t = k * period / fs
+        s = max(0.0, t - lead_s) * speed_mps
+        pos = start + heading * min(s, length)
+        pos = pos + [0.0, 0.0, 0.02 * np.sin(2 * np.pi * 1.8 * t + bob_phase)]
+        yaw = np.radians(3.0) * np.sin(2 * np.pi * 0.9 * t + sway_phase)
+        c, sn = np.cos(yaw), np.sin(yaw)
+        fwd = np.array([c * heading[0] - sn * heading[1], sn * heading[0] + c * heading[1], 0.0])
+        room = build_room(scene, fs, WALK_SIMULATION)  # pyroomacoustics keeps per-source state
+        room.add_source(pos, directivity=CardioidFamily(
+            DirectionVector(np.degrees(np.arctan2(fwd[1], fwd[0])), 90.0), scene.emitter_p))
+        room.add_microphone(pos + [0.0, 0.0, MIC_ABOVE_EMITTER_M])
+        room.compute_rir()
+        h = np.asarray(room.rir[0][0], float)[lag:lag + n_ir]
+        e = k * period + latency
+        seg = np.convolve(h, probe)
+        x[e:e + len(seg)] += seg
+        times[k] = t
+        dists[k] = abs((pos - p0) @ normal)
+    direct = np.max(np.abs(np.convolve(np.asarray(room.rir[0][0], float)[lag:lag + 64], probe)))
+    n = len(x)
+    x += direct * (10 ** (-snr / 20) * colored_noise(n, 1.0, rng) + 10 ** (-60 / 20) * rng.standard_normal(n))
+    gain = 0.5 / direct  # the direct sound peaks at half scale
+    return Walk((x * gain)[:n_pulses * period + period], fs, times, dists, latency / fs)
+
+
+def echo_round_trip_s(distance_m: float) -> float:
+    """Seconds from emission to the echo of a surface ``distance_m`` straight ahead (microphone
+    7 cm above the emitter)."""
+    return float(np.sqrt((2 * distance_m) ** 2 + MIC_ABOVE_EMITTER_M ** 2) / SPEED_OF_SOUND)
