@@ -214,20 +214,20 @@ class BoundaryMonitor:
         self._direct_delay: float | None = None  # samples from emission to the direct peak (latency + s / c)
         self._alert = Alert()
         self._level = "clear"
-        self._moving = False
-        from scipy import fft
+        self._kernels: dict[int, np.ndarray] = {}
 
-        n = fft.next_fast_len(self.window + len(self.probe), real=True)
-        self._nfft = n
-        # The analytic matched filter: the probe's conjugate spectrum on positive frequencies only
-        # (doubled), so one inverse FFT gives the correlation and its Hilbert pair at once.
-        spec = np.zeros(n, complex)
-        half = np.conj(fft.rfft(self.probe, n))
-        spec[:len(half)] = half
-        spec[1:(n + 1) // 2] *= 2.0
-        if n % 2 == 0:
-            spec[n // 2] = half[-1]
-        self._kernel = spec
+    def _kernel(self, n: int) -> np.ndarray:
+        """The analytic matched filter for an FFT of ``n``: the probe's conjugate spectrum on
+        positive frequencies only (doubled), so one inverse FFT gives the correlation and its
+        Hilbert pair at once (its magnitude is the envelope). Cached per size: a pulse still
+        arriving is filtered with a shorter FFT."""
+        if n not in self._kernels:
+            from scipy import fft
+
+            half = np.conj(fft.rfft(self.probe, n))
+            half[1:(n + 1) // 2] *= 2.0
+            self._kernels[n] = half
+        return self._kernels[n]
 
     # -- The callback ------------------------------------------------------------------------------
     def __call__(self, mic, speaker=None) -> Alert:
@@ -318,10 +318,21 @@ class BoundaryMonitor:
             self._pulse_done = k
         current = self._now // self.period
         partial = None
-        watched = any(tr.ahead and self._now / self.fs - tr.approached_at <= 1.0 for tr in self._tracks)
-        if watched and current > self._pulse_done and self._now - current * self.period > len(self.probe):
-            partial = self._detect(current, self._now)  # only while something nears: it may cross a threshold
+        if (current > self._pulse_done and self._now - current * self.period > len(self.probe)
+                and self._near_a_threshold(current * self.period / self.fs)):
+            partial = self._detect(current, self._now)  # its echo may cross a threshold: do not wait
         self._judge(partial, current)
+
+    def _near_a_threshold(self, t: float) -> bool:
+        """Whether a surface in the way may cross an alert threshold with the pulse emitted at
+        ``t`` (within 0.3 m of a distance threshold, or 0.5 s of the time-to-contact one)."""
+        for tr in self._tracks:
+            if tr.ahead and t - tr.approached_at <= 1.0:
+                d = tr.predict(t)
+                closing = -(tr.speed or 0.0)
+                if d < self.caution_m + 0.3 or (closing > 0.05 and d / closing < self.caution_ttc_s + 0.5):
+                    return True
+        return False
 
     def _detect(self, k: int, stop: int):
         """Echo distances (m) and strengths of pulse ``k`` from its samples up to ``stop``, keeping
@@ -332,10 +343,10 @@ class BoundaryMonitor:
             return None
         from scipy import fft
 
-        n = self._nfft
+        n = fft.next_fast_len(len(x) + len(self.probe), real=True)
         spec = np.zeros(n, complex)
         half = fft.rfft(x, n)
-        spec[:len(half)] = half * self._kernel[:len(half)]
+        spec[:len(half)] = half * self._kernel(n)
         env = np.abs(fft.ifft(spec, overwrite_x=True)[:len(x) - len(self.probe) + 1])  # lags where the whole probe fits: ended echoes
         head = env[:self.latency_max]
         if not len(head):
