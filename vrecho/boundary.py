@@ -11,20 +11,25 @@ pulse:
    latency cancels), echo peaks above the noise floor and the direct sound's sidelobes, each
    timed to a fraction of a sample by parabolic interpolation. A surface straight ahead at ``d``
    returns the echo path ``L = sqrt((2 d)^2 + s^2)`` (``s``: emitter to microphone): ``d`` follows.
-2. **Tracking.** Echo distances are chained over pulses into tracks (nearest within a gate);
-   a track's closing speed is the least-squares slope of its last 0.4 s, its time to contact
-   distance / speed.
+2. **Tracking.** Echo distances are chained over pulses into tracks (nearest to each track's
+   prediction, within 12 cm); an alpha-beta filter gives each track's distance and closing
+   speed (it follows a wearer who starts or stops within a few pulses), time to contact is
+   distance / closing speed.
 3. **Alerts with hysteresis.** Only surfaces the wearer moves toward count (``approach_m``
-   nearer within 0.8 s, in the last second) and will not pass by (the closest point of approach,
-   from a fit of d(t)^2 = (v (t_c - t))^2 + a^2 over the last second, is within ``miss_m``: the
-   wall above a door nears too, but passes overhead): that is what tells the wall ahead from the floor,
-   the ceiling and walls alongside, which one microphone cannot tell by direction. *caution*
-   when time to contact is under ``caution_ttc_s`` or distance under ``caution_m``, *stop* under
-   ``stop_m``; an alert ends only ``hysteresis_m`` beyond its threshold (or when the surface
-   stops approaching for a second).
+   nearer within 0.8 s, in the last second) and will not pass by: a point at lateral offset
+   ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, so a quadratic fit over the last 0.3 to 0.6 s
+   gives a^2, the closest point of approach; a surface is in the way when a^2 lies within
+   +/- ``miss_m``^2 by two standard errors (a surface straight ahead has a = 0; the wall above a
+   door, heard by way of the ceiling, or a wall beside it by way of a side wall, nears too but
+   passes by, and a track whose fit is poor waits). This is what tells the wall ahead from the
+   floor, the ceiling and walls alongside, which one microphone cannot tell by direction.
+   *caution* when time to contact is under ``caution_ttc_s`` or distance under ``caution_m``,
+   *stop* under ``stop_m``; an alert ends only ``hysteresis_m`` beyond its threshold (or when
+   the surface stops approaching for a second).
 
-The alert is recomputed every block from what has arrived: an echo that crosses a threshold
-raises the alert in the block in which that echo ends.
+The alert is recomputed every block from what has arrived: while a surface in the way is near a
+threshold, each block also analyses the pulse still arriving, so an echo that crosses the
+threshold raises the alert in the block in which that echo ends.
 
 Robustness: clipped samples are flagged (the timing survives clipping); runs of exact zeros
 (dropouts) and non-finite samples are flagged and their pulse skipped; any block size, changing
@@ -38,6 +43,7 @@ the monitor does not guess the material: the scan's repaired surfaces carry it.
 
 from __future__ import annotations
 
+import bisect
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -133,28 +139,33 @@ class _Track:
         t = self.times
         if t[-1] - t[0] < 0.6 * span_s:
             return 0.0
-        k = next(i for i in range(len(t) - 1, -1, -1) if t[i] <= t[-1] - span_s or i == 0)
+        k = max(bisect.bisect_right(t, t[-1] - span_s) - 1, 0)
         return float(self.dists[k] - self.dists[-1])
 
     def in_the_way(self, miss_m: float, span_s: float = 0.6) -> bool | None:
         """Whether the wearer will pass within ``miss_m`` of the surface (closest point of
         approach). A point at lateral offset ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, a
         quadratic in t (fitted to the last ``span_s``) whose minimum is a^2; a surface straight
-        ahead has a = 0. True when a^2 lies below miss_m^2 by two standard errors of the fit,
-        False when above by two, None while it cannot tell (a short track, a far surface: the
-        minimum is then an extrapolation, and a head's bob hides the curvature)."""
+        ahead has a = 0. True when a^2 lies below miss_m^2 by two standard errors of the fit
+        (and not far below 0, which no steady motion gives), False when above by two, None while
+        it cannot tell (a short track, a far surface: the minimum is then an extrapolation, and a
+        head's bob hides the curvature)."""
         t = np.array(self.times)
         keep = t >= t[-1] - span_s
-        if t[-1] - t[keep][0] < 0.45 * span_s or keep.sum() < 8:
+        if t[-1] - t[keep][0] < 0.9 * span_s or keep.sum() < 8:
             return None
         tt = t[keep] - t[-1]
-        (p2, p1, p0), cov = np.polyfit(tt, np.array(self.dists)[keep] ** 2, 2, cov=True)
+        y = np.array(self.dists)[keep] ** 2
+        x = np.stack([tt ** 2, tt, np.ones_like(tt)], axis=1)
+        inv = np.linalg.inv(x.T @ x)
+        p2, p1, p0 = coef = inv @ (x.T @ y)
+        cov = inv * float(np.sum((y - x @ coef) ** 2)) / max(len(y) - 3, 1)
         if p2 <= 1e-3:  # not nearing at a steady pace (starting, stopping): cannot tell yet
             return None
         a2 = p0 - p1 ** 2 / (4 * p2)
         g = np.array([p1 ** 2 / (4 * p2 ** 2), -p1 / (2 * p2), 1.0])
         sigma = float(np.sqrt(max(g @ cov @ g, 0.0)))
-        if a2 + 2 * sigma < miss_m ** 2:
+        if -miss_m ** 2 < a2 - 2 * sigma and a2 + 2 * sigma < miss_m ** 2:  # far below 0 is a misfit
             return True
         if a2 - 2 * sigma > miss_m ** 2:
             return False
@@ -382,19 +393,20 @@ class BoundaryMonitor:
         ok = (path > s) & (d >= self.min_range_m) & (d <= self.max_range_m)
         return _merge(list(zip(d[ok].tolist(), (b[ok] / peak_direct).tolist())), 0.03)
 
-    def _associate(self, t: float, echoes) -> list[tuple[_Track, float, float]]:
-        pairs, used = [], set()
+    def _associate(self, t: float, echoes) -> list[tuple[_Track | None, float, float]]:
+        """Each echo (nearest first) with the nearest unclaimed track whose prediction lies within
+        12 cm, or None (a new surface)."""
+        predicted = np.array([tr.predict(t) for tr in self._tracks]) if self._tracks else np.zeros(0)
+        free = np.ones(len(predicted), bool)
+        pairs = []
         for d, strength in sorted(echoes):
-            best, gap = None, 0.12
-            for tr in self._tracks:
-                if id(tr) in used:
-                    continue
-                g = abs(tr.predict(t) - d)
-                if g < gap:
-                    best, gap = tr, g
-            if best is not None:
-                used.add(id(best))
-            pairs.append((best, d, strength))
+            gap = np.where(free, np.abs(predicted - d), np.inf)
+            j = int(np.argmin(gap)) if len(gap) else -1
+            if j >= 0 and gap[j] < 0.12:
+                free[j] = False
+                pairs.append((self._tracks[j], d, strength))
+            else:
+                pairs.append((None, d, strength))
         return pairs
 
     def _commit(self, k: int, echoes) -> None:
@@ -414,7 +426,10 @@ class BoundaryMonitor:
         for tr in updated:
             tr.ahead = None
             if t - tr.approached_at <= 1.0:
-                tr.ahead = tr.in_the_way(self.miss_m)
+                # The longest recent stretch that tells (a track may have picked up another
+                # echo's history where the two crossed).
+                tr.ahead = next((r for span in (0.6, 0.45, 0.32) if (r := tr.in_the_way(self.miss_m, span)) is not None),
+                                None)
                 if tr.ahead and tr.explained_by(still):
                     tr.ahead = False
         self._tracks = [tr for tr in self._tracks if t - tr.times[-1] <= 0.3]
