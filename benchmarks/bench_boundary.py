@@ -32,7 +32,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")  # one core, as a headset would gi
 import numpy as np  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from vrecho.boundary import BoundaryMonitor  # noqa: E402
+from vrecho.boundary import BoundaryMonitor, ranging_probe  # noqa: E402
 from vrecho.scene import Discontinuity, _closed_absorption, random_scene  # noqa: E402
 from vrecho.walks import echo_round_trip_s, simulate_walk  # noqa: E402
 
@@ -141,8 +141,7 @@ def main() -> None:
                 continue
             start, goal, plane = geometry
             speed = float(rng.uniform(0.5, 2.0))
-            probe = BoundaryMonitor(fs).probe
-            walk = simulate_walk(scene, start, goal, speed, probe, 0.04, fs, rng, plane,
+            walk = simulate_walk(scene, start, goal, speed, ranging_probe(fs), 0.04, fs, rng, plane,
                                  stop_m=0.0 if kind == "open" else 0.15)
             for condition in ("clean", "disturbed"):
                 x = walk.mic if condition == "clean" else disturb(walk.mic.copy(), fs, rng)
@@ -156,7 +155,7 @@ def main() -> None:
     from scipy import fft
 
     x = np.random.default_rng(0).standard_normal(480)
-    probe = BoundaryMonitor(48000).probe
+    probe = ranging_probe(48000)
     t = time.perf_counter()
     for _ in range(2000):
         fft.irfft(fft.rfft(x, 1024) * np.conj(fft.rfft(probe, 1024)), 1024)

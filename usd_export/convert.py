@@ -16,8 +16,10 @@ def from_reconstruction(result) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarra
     vertices = np.asarray(mesh.vertices)
     faces = np.asarray(mesh.triangles)
     colours = np.asarray(mesh.vertex_colors) if mesh.has_vertex_colors() else np.full((len(vertices), 3), 0.6)
-    added = {tuple(t) for s in result.surfaces for t in s.triangles}
-    keep = np.array([tuple(t) not in added for t in faces], bool) if added else np.ones(len(faces), bool)
+    keep = np.ones(len(faces), bool)
+    if result.surfaces:
+        rows = lambda a: np.ascontiguousarray(a, dtype=np.int64).view(np.dtype((np.void, 24))).ravel()  # noqa: E731
+        keep = ~np.isin(rows(faces), rows(np.vstack([s.triangles for s in result.surfaces])))
     used = np.unique(faces[keep])
     index = np.full(len(vertices), -1)
     index[used] = np.arange(len(used))
@@ -28,7 +30,7 @@ def from_reconstruction(result) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarra
     for k, (hole, d) in enumerate(zip(result.holes, result.decisions)):
         depths = [r["depth_m"] for r in d.frames if r.get("depth_m") is not None]
         depth = float(np.median(depths)) if depths else None
-        if d.state == "closed" and k in filled:
+        if d.state == "closed":  # the repair fills every closed hole
             s = filled[k]
             surfaces.append(LabeledSurface(f"{s.material}_{k}", s.polygon, "closed", s.material, depth, d.confidence))
         else:
@@ -36,8 +38,7 @@ def from_reconstruction(result) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarra
             n = np.cross(polygon[1] - polygon[0], polygon[2] - polygon[0])
             if n @ hole.plane.normal < 0:  # face the room
                 polygon = polygon[::-1]
-            surfaces.append(LabeledSurface(f"opening_{k}", polygon, d.state, d.material if d.state == "closed" else None,
-                                           depth, d.confidence))
+            surfaces.append(LabeledSurface(f"opening_{k}", polygon, "open", None, depth, d.confidence))
     return room, surfaces
 
 

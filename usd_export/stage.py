@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from vrecho.errors import VrechoError
+from vrecho.reconstruct import SURFACE_COLOURS
 
 SUFFIXES = (".usda", ".usdc", ".usd", ".usdz")
 STATES = ("open", "closed")
@@ -251,7 +252,7 @@ def _write_stage(stage_path: Path, audio_dir: Path, vertices, faces, colours, su
         p = np.asarray(s.polygon, float)
         n = np.cross(p[1] - p[0], p[2] - p[0])
         n = n / max(np.linalg.norm(n), 1e-12)
-        colour = {"glass": (0.55, 0.75, 0.95), "mirror": (0.85, 0.85, 0.9)}.get(s.material, (0.6, 0.6, 0.6))
+        colour = SURFACE_COLOURS.get(s.material, SURFACE_COLOURS["wall"])  # as the repaired mesh shows them
         mesh = _mesh(stage, f"/World/Surfaces/{name}", p, [len(p)], np.arange(len(p)), n[None], UsdGeom.Tokens.uniform,
                      colour, UsdGeom.Tokens.constant)
         prim = mesh.GetPrim()

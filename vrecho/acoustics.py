@@ -184,11 +184,7 @@ def impulse_responses(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: in
     pra.random.seed(int(key[:8], 16))  # ray tracing repeatable for the same key
     room = build_room(scene, fs, sim)
     if directive:
-        from pyroomacoustics.directivities import CardioidFamily, DirectionVector
-
-        f = np.asarray(facing, float) / np.linalg.norm(facing)
-        direction = DirectionVector(np.degrees(np.arctan2(f[1], f[0])), np.degrees(np.arccos(np.clip(f[2], -1, 1))))
-        room.add_source(source, directivity=CardioidFamily(direction, scene.emitter_p))
+        room.add_source(source, directivity=emitter_directivity(facing, scene.emitter_p))
     else:
         room.add_source(source)
     room.add_microphone_array(pra.MicrophoneArray(mics.T, fs))
@@ -206,6 +202,16 @@ def impulse_responses(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: in
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_save_npy(path, out)
     return out
+
+
+def emitter_directivity(facing: np.ndarray, p: float):
+    """The device's loudspeaker as pyroomacoustics sees it: a cardioid-family pattern (``p``:
+    1 omnidirectional, 0.5 cardioid) pointing along ``facing``."""
+    from pyroomacoustics.directivities import CardioidFamily, DirectionVector
+
+    f = np.asarray(facing, float) / np.linalg.norm(facing)
+    direction = DirectionVector(np.degrees(np.arctan2(f[1], f[0])), np.degrees(np.arccos(np.clip(f[2], -1, 1))))
+    return CardioidFamily(direction, p)
 
 
 def device_impulse_response(scene: Scene, pose: DevicePose, array: MicArray | None = None, fs: int = FS,

@@ -49,10 +49,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .acoustics import SPEED_OF_SOUND
 from .errors import VrechoError
-
-SPEED_OF_SOUND = 343.0
-LEVELS = ("clear", "caution", "stop")
 
 
 def ranging_probe(fs: int, duration_s: float = 0.005, f0: float = 4000.0, f1: float = 20000.0) -> np.ndarray:
@@ -278,7 +276,7 @@ class BoundaryMonitor:
         if _clipped(x):
             flags.append("clipped")
         self._push(x, valid)
-        self._update(flags)
+        self._update()
         self._alert.flags = tuple(dict.fromkeys(self._alert.flags + tuple(flags)))
         return self._alert
 
@@ -310,14 +308,14 @@ class BoundaryMonitor:
             self._valid[idx] = ok
             self._now += len(chunk)
             if lo + size < len(x):
-                self._update([])
+                self._update()
 
     def _samples(self, start: int, stop: int) -> tuple[np.ndarray, bool]:
         size = len(self._buf)
         idx = np.arange(start, stop) % size
         return self._buf[idx], bool(self._valid[idx].all())
 
-    def _update(self, flags: list[str]) -> None:
+    def _update(self) -> None:
         """Commit every pulse whose window is complete, then judge the current pulse from what has
         arrived of it."""
         last = (self._now - self.window) // self.period  # newest pulse with a complete window
@@ -363,12 +361,11 @@ class BoundaryMonitor:
         if not len(head):
             return None
         d0 = int(np.argmax(head))
-        direct = _parabolic(env, d0)
-        if self._direct_delay is None or abs(direct - self._direct_delay) > 0.5:
-            if self._direct_delay is not None and abs(direct - self._direct_delay) > 3:
-                direct = self._direct_delay  # a stray peak (an echo in the head): keep the reference
-            else:
-                self._direct_delay = direct if self._direct_delay is None else 0.9 * self._direct_delay + 0.1 * direct
+        direct = float(_parabolic(env, np.array([d0]))[0])
+        if self._direct_delay is None:
+            self._direct_delay = direct
+        elif 0.5 < abs(direct - self._direct_delay) <= 3:  # drift; a larger jump is a stray peak: kept out
+            self._direct_delay = 0.9 * self._direct_delay + 0.1 * direct
         ref = self._direct_delay
         peak_direct = env[d0]
         lo = int(ref + 2 * self.min_range_m / SPEED_OF_SOUND * self.fs)
@@ -384,14 +381,11 @@ class BoundaryMonitor:
         peaks = np.flatnonzero(is_peak) + 1 + lo
         if not len(peaks):
             return []
-        a, b, c = env[peaks - 1], env[peaks], env[np.minimum(peaks + 1, len(env) - 1)]
-        den = a - 2 * b + c
-        frac = np.where(den < 0, 0.5 * (a - c) / np.where(den < 0, den, -1.0), 0.0)  # parabolic peak
         s = self.mic_offset_m
-        path = SPEED_OF_SOUND * (peaks + frac - ref) / self.fs + s
+        path = SPEED_OF_SOUND * (_parabolic(env, peaks) - ref) / self.fs + s
         d = 0.5 * np.sqrt(np.maximum(path ** 2 - s ** 2, 0.0))
         ok = (path > s) & (d >= self.min_range_m) & (d <= self.max_range_m)
-        return _merge(list(zip(d[ok].tolist(), (b[ok] / peak_direct).tolist())), 0.03)
+        return _merge(list(zip(d[ok].tolist(), (env[peaks][ok] / peak_direct).tolist())), 0.03)
 
     def _associate(self, t: float, echoes) -> list[tuple[_Track | None, float, float]]:
         """Each echo (nearest first) with the nearest unclaimed track whose prediction lies within
@@ -456,33 +450,30 @@ class BoundaryMonitor:
             if best is None or (ttc, d) < (best[2], best[0]):
                 best = (d, closing, ttc, tr, at)
         if best is None:
-            level = "clear"
+            self._level = "clear"
+            moving = any(abs(tr.closed_in(0.8)) >= self.approach_m for tr in self._tracks)
+            self._alert = Alert("clear", None, "opening" if moving else None, 0.0, None, None,
+                                () if self._tracks else ("no_echo",))
         else:
             d, closing, ttc, tr, at = best
             h = self.hysteresis_m
             stop = d < self.stop_m + (h if self._level == "stop" else 0.0)
             caution = (d < self.caution_m + (h if self._level != "clear" else 0.0)
                        or ttc < self.caution_ttc_s * (1.1 if self._level != "clear" else 1.0))
-            level = "stop" if stop else "caution" if caution else "clear"
-        self._level = level
-        if best is None:
-            moving = any(abs(tr.closed_in(0.8)) >= self.approach_m for tr in self._tracks)
-            self._alert = Alert(level, None, "opening" if moving else None, 0.0, None, None,
-                                () if self._tracks else ("no_echo",))
-        else:
-            d, closing, ttc, tr, at = best
+            level = self._level = "stop" if stop else "caution" if caution else "clear"
             conf = float(np.clip(min(len(tr.dists), 10) / 10 * min(1.0, np.mean(tr.strengths) * 200), 0, 1))
             self._alert = Alert(level, float(d), "closed", conf, float(closing), None if np.isinf(ttc) else float(ttc),
                                 (), float(at))
 
 
-def _parabolic(y: np.ndarray, i: int) -> float:
-    """The peak's position to a fraction of a sample (a parabola through three samples)."""
-    if i <= 0 or i >= len(y) - 1:
-        return float(i)
-    a, b, c = y[i - 1], y[i], y[i + 1]
+def _parabolic(y: np.ndarray, i: np.ndarray) -> np.ndarray:
+    """Peaks' positions to a fraction of a sample (a parabola through three samples; a peak at
+    either end of ``y`` stays where it is)."""
+    inner = (i > 0) & (i < len(y) - 1)
+    a, b, c = y[np.maximum(i - 1, 0)], y[i], y[np.minimum(i + 1, len(y) - 1)]
     den = a - 2 * b + c
-    return float(i + 0.5 * (a - c) / den) if den < 0 else float(i)
+    bend = inner & (den < 0)
+    return i + np.where(bend, 0.5 * (a - c) / np.where(bend, den, -1.0), 0.0)
 
 
 def _merge(echoes, within_m: float):

@@ -79,9 +79,9 @@ def _export(args) -> int:
     sources = {"none": lambda: [], "truth": lambda: usd_export.sources_from_scene(scene)}.get(
         args.sources, lambda: usd_export.sources_from_json(args.sources))()
     path = usd_export.write_scene(args.out, room, surfaces, sources)  # refuses a stage with validation errors
-    problems = usd_export.validate(path)
+    problems = usd_export.validate(path)  # the file as it lies now, and its warnings for the user
     errors = [p for p in problems if p.severity == "error"]
-    if errors:  # write_scene checked before moving it into place; this is the file on disk
+    if errors:
         raise VrechoError(f"export: {path} has {len(errors)} validation error(s); first: {errors[0]}")
     for p in problems:
         print(f"  {p}")

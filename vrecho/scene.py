@@ -797,9 +797,8 @@ def walkthrough_path(scene: Scene, distance_m: float = 1.6, height_m: float = 1.
     Keyframes in the footprint's order: ``distance_m`` in front of each discontinuity (or of the
     middle of a wall without one), looking at its centre, then tilting down to its foot and up
     to its top where they lie beyond the band a camera holds from there (about 0.9 to 2.1 m
-    high); pulled in where
-    the room is too narrow. What a person scanning the room would do; the scenes of
-    :func:`random_scene` have no path of their own.
+    high); pulled in where the room is too narrow. What a person scanning the room would do; the
+    scenes of :func:`random_scene` have no path of their own.
     """
     room = scene.room
     positions, targets = [], []

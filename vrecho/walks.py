@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .acoustics import SPEED_OF_SOUND, Simulation, build_room
+from .acoustics import SPEED_OF_SOUND, Simulation, build_room, emitter_directivity
 from .errors import VrechoError
 from .scene import MIC_ABOVE_EMITTER_M, Scene
 from .signals import colored_noise
@@ -42,7 +42,6 @@ def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: 
     at ``speed_mps``, stopping ``stop_m`` before the target's plane (``plane``: a point on it
     and its unit normal). ``lead_s``: standing still at the start first."""
     import pyroomacoustics as pra
-    from pyroomacoustics.directivities import CardioidFamily, DirectionVector
 
     start, goal = np.asarray(start, float), np.asarray(goal, float)
     p0, normal = np.asarray(plane[0], float), np.asarray(plane[1], float)
@@ -74,8 +73,7 @@ def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: 
         c, sn = np.cos(yaw), np.sin(yaw)
         fwd = np.array([c * heading[0] - sn * heading[1], sn * heading[0] + c * heading[1], 0.0])
         room = build_room(scene, fs, WALK_SIMULATION)  # pyroomacoustics keeps per-source state
-        room.add_source(pos, directivity=CardioidFamily(
-            DirectionVector(np.degrees(np.arctan2(fwd[1], fwd[0])), 90.0), scene.emitter_p))
+        room.add_source(pos, directivity=emitter_directivity(fwd, scene.emitter_p))
         room.add_microphone(pos + [0.0, 0.0, MIC_ABOVE_EMITTER_M])
         room.compute_rir()
         h = np.asarray(room.rir[0][0], float)[lag:lag + n_ir]
