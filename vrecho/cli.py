@@ -69,14 +69,15 @@ def _export(args) -> int:
     from .reconstruct import open_source, reconstruct
 
     usd_export.check_target(args.out)  # before the work, not after
-    if args.sources not in ("none", "truth") and not Path(args.sources).is_file():
-        raise VrechoError(f"sources: expected 'none', 'truth' or a JSON file, got {args.sources!r}")
+    if args.sources not in ("none", "truth", "heard") and not Path(args.sources).is_file():
+        raise VrechoError(f"sources: expected 'none', 'truth', 'heard' or a JSON file, got {args.sources!r}")
     scan, scene = open_source(args.scene, args.frames, progress=not args.quiet)
-    if args.sources == "truth" and scene is None:
-        raise VrechoError("sources: 'truth' needs a scene (builtin or a scene JSON), not a scan folder")
+    if args.sources in ("truth", "heard") and scene is None:
+        raise VrechoError(f"sources: {args.sources!r} needs a scene (builtin or a scene JSON), not a scan folder")
     result = reconstruct(scan, scene, args.labels, args.variant, seed=args.seed, progress=not args.quiet)
     room, surfaces = usd_export.from_reconstruction(result)
-    sources = {"none": lambda: [], "truth": lambda: usd_export.sources_from_scene(scene)}.get(
+    sources = {"none": lambda: [], "truth": lambda: usd_export.sources_from_scene(scene),
+               "heard": lambda: _heard(scene, args.seed, not args.quiet)}.get(
         args.sources, lambda: usd_export.sources_from_json(args.sources))()
     path = usd_export.write_scene(args.out, room, surfaces, sources)  # refuses a stage with validation errors
     problems = usd_export.validate(path)  # the file as it lies now, and its warnings for the user
@@ -89,6 +90,23 @@ def _export(args) -> int:
           f"({', '.join(f'{s.name} {s.state}' for s in surfaces) or 'none'}), {len(sources)} sound sources; "
           f"OpenUSD's validators: no errors, {len(problems)} other findings")
     return 0
+
+
+def _heard(scene, seed: int, progress: bool) -> list:
+    """The scene's sources heard by the headset along its walkthrough, located and separated."""
+    import numpy as np
+
+    import localization
+
+    sim = localization.hear_scene(scene, np.random.default_rng(seed))
+    lo = np.r_[scene.room.footprint.min(axis=0), 0.0]
+    hi = np.r_[scene.room.footprint.max(axis=0), scene.room.height_m]
+    placed = localization.place_sources(sim.captures, bounds=(lo, hi), progress=progress)
+    for p in placed:
+        err = min(np.linalg.norm(p.position - s.position) for s in sim.sources)
+        print(f"  {p.name} at {np.round(p.position, 2).tolist()} m (+/- {p.uncertainty_m or float('nan'):.2f} m, "
+              f"confidence {p.confidence:.2f}); nearest true source {err:.2f} m away")
+    return placed
 
 
 def _demo(args) -> int:
@@ -168,8 +186,10 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--variant", choices=("simplified", "per_vertex"), default="simplified",
                    help="Algorithm 1's fill (default: simplified)")
     x.add_argument("--sources", default="none",
-                   help="sound sources: 'none' (default), 'truth' (a scene's own sources where they are) or a "
-                        "JSON file of placed sources (see usd_export.sources_from_json)")
+                   help="sound sources: 'none' (default), 'truth' (a scene's own sources where they are), "
+                        "'heard' (a scene's sources recorded by the headset's 4 microphones along the walkthrough, "
+                        "located and separated by localization.place_sources) or a JSON file of placed sources "
+                        "(see usd_export.sources_from_json)")
     x.add_argument("--frames", type=int, default=60, help="walkthrough frames of a simulated scan (default: 60)")
     x.add_argument("--seed", type=int, default=0, help="seed of the simulated recordings (default: 0)")
     x.add_argument("--quiet", action="store_true", help="no progress bars")

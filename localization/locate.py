@@ -1,0 +1,289 @@
+"""Where the sources are: direction of arrival per capture, and world positions across captures.
+
+Two ways, compared side by side in ``benchmarks/bench_localization.py``:
+
+- **Per capture** (:func:`doa`, a pyroomacoustics method: MUSIC, NormMUSIC, SRP, CSSM, WAVES,
+  TOPS): each capture gives ``k`` directions on a sphere grid.
+- **vrecho's** (:func:`locate`): every capture at once. In each capture, the onset
+  time-frequency bins (where the direct sound dominates the room's reverberation) vote for the
+  directions whose plane wave explains them (normalised beam power to the 8th power: mixed,
+  reverberant or aliased bins count little). A world point's score is the mean, over captures,
+  of each capture's votes toward it: a true source gathers the votes of every capture, a
+  crossing of two captures' directions only theirs. Sources are taken one at a time: the best
+  point on a 10 cm grid, refined to a few millimetres; then each bin gives up its vote as far as
+  that source explains it (weight times 1 - score^2), and the next map is made, away from the
+  sources found (sources closer than 0.75 m are one to this array). Without a given count, a next peak
+  weaker than ``min_strength`` times the first ends the search. Each position's standard error
+  comes from triangulating each capture's own best direction near it (least squares); the
+  directions reported per capture point at the joint positions.
+
+Positions are in the captures' world frame (metres); directions are unit vectors from each
+capture's array centre.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from vrecho.acoustics import SPEED_OF_SOUND
+from vrecho.errors import VrechoError
+
+from .capture import Capture
+
+BAND_HZ = (200.0, 7000.0)
+MIN_SEPARATION_M = 0.75
+ONSET_FRAMES = 3
+ONSET_RATIO = 2.0
+PRA_METHODS: tuple[str, ...] = ("MUSIC", "NormMUSIC", "SRP", "CSSM", "WAVES", "TOPS")
+"""pyroomacoustics' grid-based DOA methods (FRIDA works in the plane only)."""
+
+
+@dataclass
+class Located:
+    """``positions`` (K, 3); ``uncertainty_m`` (K,) standard error of each position (NaN where
+    fewer than three captures saw it); ``strength`` (K,) each source's share of the map's peak
+    power (the first is 1); ``directions`` (captures, K, 3) unit vectors from each capture."""
+
+    positions: np.ndarray
+    uncertainty_m: np.ndarray
+    strength: np.ndarray
+    directions: np.ndarray
+
+
+def check_captures(captures) -> list[Capture]:
+    if isinstance(captures, Capture):
+        captures = [captures]
+    captures = list(captures)
+    if not captures:
+        raise VrechoError("captures: none given")
+    for i, c in enumerate(captures):
+        if not isinstance(c, Capture):
+            raise VrechoError(f"captures[{i}]: expected a localization.Capture, got {type(c).__name__}")
+        if c.n_mics < 2:
+            raise VrechoError(f"captures[{i}]: {c.n_mics} microphone; direction finding needs at least 2 "
+                              "(a single microphone gives only EchoCNN's position head)")
+    if len({c.fs for c in captures}) > 1:
+        raise VrechoError(f"captures: different sample rates {sorted({c.fs for c in captures})}")
+    return captures
+
+
+def stft(audio: np.ndarray, nfft: int = 512) -> np.ndarray:
+    """(M, F, T) short-time spectra, Hann window, hop nfft / 2."""
+    hop = nfft // 2
+    n = audio.shape[1]
+    n_frames = max(1, 1 + (n - nfft) // hop)
+    idx = np.arange(nfft)[None] + hop * np.arange(n_frames)[:, None]
+    frames = audio[:, idx] * np.hanning(nfft)
+    return np.fft.rfft(frames, axis=-1).transpose(0, 2, 1)
+
+
+def _band(fs: int, nfft: int) -> np.ndarray:
+    f = np.fft.rfftfreq(nfft, 1 / fs)
+    return (f >= BAND_HZ[0]) & (f <= min(BAND_HZ[1], 0.45 * fs))
+
+
+def _grid(lo: np.ndarray, hi: np.ndarray, step: float) -> np.ndarray:
+    axes = [np.arange(a, b + 1e-9, step) for a, b in zip(lo, hi)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+
+
+def search_box(captures: list[Capture], bounds=None) -> tuple[np.ndarray, np.ndarray]:
+    """Where sources are sought: ``bounds`` ((3,), (3,)) if given (the reconstructed room), else
+    the captures' extent grown by 4 m across and 2 m up and down."""
+    if bounds is not None:
+        lo, hi = (np.asarray(b, dtype=float) for b in bounds)
+        if lo.shape != (3,) or hi.shape != (3,) or np.any(hi <= lo) or not np.all(np.isfinite([lo, hi])):
+            raise VrechoError(f"bounds: expected (low corner, high corner), each 3 finite numbers with low < high, got {bounds!r}")
+        return lo, hi
+    centers = np.array([c.center for c in captures])
+    return centers.min(0) - np.array([4.0, 4.0, 2.0]), centers.max(0) + np.array([4.0, 4.0, 1.5])
+
+
+def _refine(maps, x: np.ndarray, lo, hi, step: float, away=()) -> np.ndarray:
+    """Climb from grid point ``x`` on ever finer grids, keeping ``MIN_SEPARATION_M`` from ``away``."""
+    for s in (step / 2, step / 4, step / 8, step / 16):
+        pts = np.clip(_grid(x - 2 * s, x + 2 * s, s), lo, hi)
+        p = maps.power(pts)
+        for y in away:
+            p[np.linalg.norm(pts - y, axis=1) < MIN_SEPARATION_M] = -np.inf
+        x = pts[int(np.argmax(p))]
+    return x
+
+
+def _sphere(n: int) -> np.ndarray:
+    """``n`` near-uniform unit vectors (Fibonacci lattice)."""
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    phi = np.pi * (1 + 5 ** 0.5) * i
+    r = np.sqrt(1 - z * z)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], -1)
+
+
+def triangulate(centers: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, float]:
+    """Least-squares point nearest rays ``centers + t * directions`` and its standard error (m)."""
+    P = np.eye(3)[None] - directions[:, :, None] * directions[:, None, :]
+    A = P.sum(axis=0)
+    x = np.linalg.solve(A, np.einsum("nij,nj->i", P, centers))
+    if len(centers) < 3:
+        return x, float("nan")
+    resid = np.einsum("nij,nj->ni", P, x - centers)
+    sigma2 = (resid ** 2).sum() / (2 * len(centers) - 3)
+    return x, float(np.sqrt(np.trace(np.linalg.inv(A)) * sigma2))
+
+
+def _pose_direction(votes: "_Votes", k: int, x: np.ndarray, cone_deg: float = 12.0) -> np.ndarray:
+    """Capture ``k``'s own best direction within ``cone_deg`` of the point ``x``."""
+    c = votes.captures[k].center
+    u0 = (x - c) / np.linalg.norm(x - c)
+    dirs = _sphere(40000)
+    dirs = dirs[dirs @ u0 > np.cos(np.radians(cone_deg))]
+    return dirs[int(np.argmax(votes.lookup(k, dirs)))]
+
+
+class _Votes:
+    """Each capture's onset time-frequency bins, each voting for the directions that explain it.
+
+    A bin's score for a direction is its normalised beam power |a^H x|^2 / (M |x|^2), 1 when one
+    plane wave from there explains the bin exactly. Only onsets vote (a bin at least
+    ``ONSET_RATIO`` times louder than the same frequency over the previous frames): there the
+    direct sound dominates, where a few metres away the room's reverberation dominates the
+    steady state. A bin's vote is its score raised to ``GAMMA``, so a bin where sources mix, or a
+    narrowband bin whose grating lobes are nearly as good as the truth, counts little. A
+    capture's direction map is the sum of its bins' votes; the world map at a point is the mean
+    over captures of each one's map toward that point.
+    """
+
+    AZ_STEP, EL_STEP, EL_MAX = 4.0, 4.0, 84.0
+    GAMMA = 8
+
+    def __init__(self, captures: list[Capture]):
+        self.captures = captures
+        self.az = np.radians(np.arange(0.0, 360.0, self.AZ_STEP))
+        self.el = np.radians(np.arange(-self.EL_MAX, self.EL_MAX + 1e-9, self.EL_STEP))
+        A, E = np.meshgrid(self.az, self.el, indexing="ij")
+        self.dirs = np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], -1).reshape(-1, 3)
+        fs = captures[0].fs
+        band = _band(fs, 512)
+        freqs = np.fft.rfftfreq(512, 1 / fs)[band]
+        self.votes, self.weights = [], []
+        for c in captures:
+            X = stft(c.audio, 512)[:, band].astype(np.complex64)  # (M, F, T)
+            energy = (np.abs(X) ** 2).sum(axis=0)  # (F, T)
+            before = np.full_like(energy, np.inf)
+            before[:, ONSET_FRAMES:] = np.stack([energy[:, ONSET_FRAMES - i:energy.shape[1] - i]
+                                                 for i in range(1, ONSET_FRAMES + 1)]).mean(axis=0)
+            keep = (energy > ONSET_RATIO * before) & (energy > np.quantile(energy, 0.3, axis=1, keepdims=True))
+            delays = self.dirs @ (c.mics - c.center).T / SPEED_OF_SOUND  # (D, M)
+            rows = []
+            for f in np.flatnonzero(keep.any(axis=1)):
+                xf = X[:, f, keep[f]]  # (M, T_f)
+                steer = np.exp(2j * np.pi * freqs[f] * delays).astype(np.complex64)
+                beam = np.abs(np.conj(steer) @ xf) ** 2 / (c.n_mics * energy[f, keep[f]])
+                rows.append((np.minimum(beam, 1.0) ** self.GAMMA).T.astype(np.float32))
+            votes = np.concatenate(rows) if rows else np.zeros((0, len(self.dirs)), np.float32)
+            self.votes.append(votes)
+            self.weights.append(np.ones(len(votes), dtype=np.float32))
+        self._maps()
+
+    def _maps(self):
+        self.maps = [(w @ v) / max(len(w), 1) for v, w in zip(self.votes, self.weights)]
+
+    def lookup(self, k: int, u: np.ndarray) -> np.ndarray:
+        """Capture ``k``'s map toward unit vectors ``u`` (N, 3), bilinear in azimuth and elevation."""
+        az = np.mod(np.arctan2(u[:, 1], u[:, 0]), 2 * np.pi) / np.radians(self.AZ_STEP)
+        el = (np.clip(np.arcsin(np.clip(u[:, 2], -1, 1)), -np.radians(self.EL_MAX), np.radians(self.EL_MAX))
+              + np.radians(self.EL_MAX)) / np.radians(self.EL_STEP)
+        i0, j0 = np.floor(az).astype(int), np.minimum(np.floor(el).astype(int), len(self.el) - 2)
+        fa, fe = az - i0, el - j0
+        m = self.maps[k].reshape(len(self.az), len(self.el))
+        i0, i1 = i0 % len(self.az), (i0 + 1) % len(self.az)
+        return ((1 - fa) * (1 - fe) * m[i0, j0] + fa * (1 - fe) * m[i1, j0] + (1 - fa) * fe * m[i0, j0 + 1]
+                + fa * fe * m[i1, j0 + 1])
+
+    def power(self, points: np.ndarray) -> np.ndarray:
+        """The world map at ``points`` (N, 3)."""
+        out = []
+        for k, c in enumerate(self.captures):
+            d = points - c.center
+            out.append(self.lookup(k, d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)))
+        out = np.array(out)
+        return np.mean(out, axis=0)
+
+    def explain(self, point: np.ndarray):
+        """Withdraw from every bin the share of its vote a source at ``point`` accounts for."""
+        for k, c in enumerate(self.captures):
+            u = (point - c.center) / np.linalg.norm(point - c.center)
+            score = self.votes[k][:, int(np.argmax(self.dirs @ u))] ** (1.0 / self.GAMMA)
+            self.weights[k] *= 1.0 - score ** 2
+        self._maps()
+
+
+def locate(captures, n_sources: int | None = None, bounds=None, step_m: float = 0.1,
+           max_sources: int = 4, min_strength: float = 0.25) -> Located:
+    """World positions of the sources heard across ``captures`` (see the module's docstring).
+
+    ``n_sources``: how many to find (None: estimated, at most ``max_sources``; a next peak weaker
+    than ``min_strength`` times the first is not a source). ``bounds``: the search box.
+    """
+    captures = check_captures(captures)
+    if n_sources is not None and (isinstance(n_sources, bool) or not isinstance(n_sources, (int, np.integer))
+                                  or n_sources < 1):
+        raise VrechoError(f"n_sources: expected a positive whole number or None, got {n_sources!r}")
+    lo, hi = search_box(captures, bounds)
+    grid = _grid(lo, hi, step_m)
+    votes = _Votes(captures)
+    found, strength = [], []
+    limit = n_sources or max_sources
+    while len(found) < limit:
+        p = votes.power(grid)
+        for x in found:  # two sources closer than this are one to this array
+            p[np.linalg.norm(grid - x, axis=1) < MIN_SEPARATION_M] = -np.inf
+        best = int(np.argmax(p))
+        if n_sources is None and found and p[best] < min_strength * strength[0]:
+            break
+        x = _refine(votes, grid[best], lo, hi, step_m, found)
+        found.append(x)
+        strength.append(float(votes.power(x[None])[0]))
+        votes.explain(x)
+    votes.weights = [np.ones_like(w) for w in votes.weights]  # every vote back, for each capture's own direction
+    votes._maps()
+    centers = np.array([c.center for c in captures])
+    positions = np.array(found).reshape(-1, 3)
+    unc = np.full(len(found), np.nan)
+    if len(captures) >= 3:
+        for i, x in enumerate(positions):
+            rays = np.array([_pose_direction(votes, k, x) for k in range(len(captures))])
+            unc[i] = triangulate(centers, rays)[1]
+    d = positions[None] - centers[:, None]
+    return Located(positions, unc, np.array(strength) / strength[0], d / np.linalg.norm(d, axis=-1, keepdims=True))
+
+
+def doa(capture: Capture, n_sources: int, method: str = "NormMUSIC", n_grid: int = 6000,
+        n_freq: int | None = None) -> np.ndarray:
+    """Directions (n_sources, 3) of the sources one capture hears, by a pyroomacoustics method
+    on a sphere grid of ``n_grid`` points, as unit vectors from the array centre (world frame).
+    ``n_freq``: use only that many frequency bins, evenly spread over the band (CSSM, WAVES and
+    TOPS take about 20 s per capture on all of them)."""
+    import pyroomacoustics as pra
+
+    (capture,) = check_captures([capture])
+    if method not in PRA_METHODS:
+        raise VrechoError(f"method: expected one of {PRA_METHODS}, got {method!r}")
+    if method in ("MUSIC", "NormMUSIC", "CSSM", "WAVES", "TOPS") and n_sources >= capture.n_mics:
+        raise VrechoError(f"{method} finds fewer sources than microphones: {n_sources} sources with "
+                          f"{capture.n_mics} microphones")
+    L = (capture.mics - capture.center).T
+    X = stft(capture.audio, 512)
+    d = pra.doa.algorithms[method](L, capture.fs, 512, c=SPEED_OF_SOUND, num_src=n_sources, dim=3, n_grid=n_grid)
+    if n_freq is None:
+        d.locate_sources(X, freq_range=list(BAND_HZ))
+    else:
+        bins = np.flatnonzero(_band(capture.fs, 512))
+        d.locate_sources(X, freq_bins=bins[np.linspace(0, len(bins) - 1, n_freq).round().astype(int)])
+    az, col = np.asarray(d.azimuth_recon), np.asarray(d.colatitude_recon)
+    out = np.stack([np.cos(az) * np.sin(col), np.sin(az) * np.sin(col), np.cos(col)], -1)
+    if len(out) < n_sources:  # fewer peaks than asked: repeat the strongest
+        out = np.vstack([out, np.repeat(out[:1], n_sources - len(out), axis=0)])
+    return out

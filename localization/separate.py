@@ -1,0 +1,163 @@
+"""Separation of the sources one capture hears, as each sounds at the reference microphone 0.
+
+Methods:
+
+- ``auxiva``, ``ilrma``, ``fastmnmf``: pyroomacoustics' blind multichannel separation (AuxIVA,
+  OverIVA when there are more microphones than sources; ILRMA, determined, on microphone 0 and
+  the ``k - 1`` farthest from it; FastMNMF2), scaled back to microphone 0 by projection.
+- ``nmf``: the single-channel fallback: KL-NMF of microphone 0's magnitude spectrogram, its
+  components grouped into sources by the similarity of their activations, Wiener masks.
+- ``informed`` (vrecho's, needs ``positions``): what vrecho knows goes in. The sources'
+  positions (from :func:`localization.locate`) give each frequency's near-field steering
+  vectors; each time-frequency bin's coherence with them starts a complex angular central
+  Gaussian mixture per frequency (so source k is the same source at every frequency: no
+  permutation problem), whose posteriors are each bin's source shares; each source's spatial
+  covariance is estimated from its shares, and the multichannel Wiener filter R_k R_x^-1 gives
+  its image at microphone 0. The filter keeps what the steering model misses (reverberation),
+  where a beamformer aimed by geometry alone would not.
+
+Every method returns an array (k, samples), the capture's length, in the order of
+``positions`` for ``informed``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vrecho.acoustics import SPEED_OF_SOUND
+from vrecho.errors import VrechoError
+
+from .capture import Capture
+
+METHODS: tuple[str, ...] = ("auxiva", "ilrma", "fastmnmf", "nmf", "informed")
+NFFT = 2048
+"""STFT length for blind separation (128 ms at 16 kHz: about the reverberation times of rooms)."""
+INFORMED_NFFT = 512
+"""STFT length for informed separation: more frames for its covariances in a short capture."""
+
+
+def _stft(audio: np.ndarray, nfft: int = NFFT) -> np.ndarray:
+    """(frames, freq, channels), as pyroomacoustics' separation expects."""
+    import pyroomacoustics as pra
+
+    win = pra.hann(nfft)
+    return np.stack([pra.transform.stft.analysis(ch, nfft, nfft // 4, win=win) for ch in audio], axis=-1)
+
+
+def _istft(Y: np.ndarray, n: int, nfft: int = NFFT) -> np.ndarray:
+    """(k, n) signals from (frames, freq, k) spectra."""
+    import pyroomacoustics as pra
+
+    out = np.zeros((Y.shape[-1], n))
+    win = pra.transform.stft.compute_synthesis_window(pra.hann(nfft), nfft // 4)
+    for k in range(Y.shape[-1]):
+        y = pra.transform.stft.synthesis(Y[:, :, k], nfft, nfft // 4, win=win)[nfft - nfft // 4:]  # its delay
+        out[k, :min(n, len(y))] = y[:n]
+    return out
+
+
+def separate(capture: Capture, n_sources: int, method: str = "informed", positions=None,
+             n_iter: int | None = None) -> np.ndarray:
+    """Separate ``n_sources`` sources from ``capture`` (see the module's docstring)."""
+    if not isinstance(capture, Capture):
+        raise VrechoError(f"capture: expected a localization.Capture, got {type(capture).__name__}")
+    if method not in METHODS:
+        raise VrechoError(f"method: expected one of {METHODS}, got {method!r}")
+    if isinstance(n_sources, bool) or not isinstance(n_sources, (int, np.integer)) or n_sources < 1:
+        raise VrechoError(f"n_sources: expected a positive whole number, got {n_sources!r}")
+    m = capture.n_mics
+    if method in ("auxiva", "ilrma", "fastmnmf", "informed") and n_sources > m:
+        raise VrechoError(f"{method} separates at most as many sources as microphones: {n_sources} sources, "
+                          f"{m} microphone{'s' if m > 1 else ''} (use method='nmf' for one channel)")
+    if method == "informed":
+        if positions is None:
+            raise VrechoError("informed separation needs the sources' positions (localization.locate)")
+        positions = np.asarray(positions, dtype=float)
+        if positions.shape != (n_sources, 3) or not np.all(np.isfinite(positions)):
+            raise VrechoError(f"positions: expected ({n_sources}, 3) finite positions, got shape {positions.shape}")
+    n = capture.audio.shape[1]
+    if method == "nmf":
+        return _nmf(capture.audio[0], n_sources, n_iter or 200)
+    if method == "informed":
+        return _istft(_informed(_stft(capture.audio, INFORMED_NFFT), capture, positions, n_iter or 30), n, INFORMED_NFFT)
+    import pyroomacoustics as pra
+
+    X = _stft(capture.audio)
+    if method == "auxiva":
+        Y = pra.bss.auxiva(X, n_src=n_sources, n_iter=n_iter or 50, proj_back=True)
+    elif method == "ilrma":  # determined: microphone 0 and the n_sources - 1 farthest from it
+        far = np.argsort(np.linalg.norm(capture.mics - capture.mics[0], axis=1))[::-1][:n_sources - 1]
+        try:
+            Y = pra.bss.ilrma(X[:, :, np.r_[0, np.sort(far)]], n_src=n_sources, n_iter=n_iter or 50, proj_back=True)
+        except np.linalg.LinAlgError:
+            raise VrechoError("ilrma: the demixing matrix became singular (try auxiva or informed)") from None
+    else:
+        Y = pra.bss.fastmnmf2(X, n_src=n_sources, n_iter=n_iter or 50, mic_index=0)
+    return _istft(Y, n)
+
+
+def steering(capture: Capture, positions: np.ndarray, freqs: np.ndarray) -> np.ndarray:
+    """Near-field steering vectors (freq, mics, sources), relative to microphone 0."""
+    dist = np.linalg.norm(capture.mics[None] - positions[:, None], axis=-1).T  # (M, K)
+    rel = dist - dist[:1]
+    return (dist[:1] / dist)[None] * np.exp(-2j * np.pi * freqs[:, None, None] * rel[None] / SPEED_OF_SOUND)
+
+
+def _informed(X: np.ndarray, capture: Capture, positions: np.ndarray, n_iter: int) -> np.ndarray:
+    freqs = np.fft.rfftfreq(INFORMED_NFFT, 1 / capture.fs)
+    share = _cacgmm(X, steering(capture, positions, freqs), n_iter, sharpness=4.0)
+    # Each source's spatial covariance from its shares; the multichannel Wiener filter
+    # R_k R_x^-1 (R_x the measured covariance, so the microphones' noise is in it).
+    n_frames, _, m = X.shape
+    Rx = np.einsum("tfm,tfn->fmn", X, np.conj(X)) / n_frames
+    iRx = np.linalg.inv(Rx + 1e-9 * np.trace(Rx, axis1=-2, axis2=-1).real.mean() * np.eye(m))
+    out = np.zeros(share.shape, dtype=complex)
+    for k in range(share.shape[-1]):
+        Rk = np.einsum("tf,tfm,tfn->fmn", share[..., k], X, np.conj(X)) / n_frames
+        out[..., k] = np.einsum("fn,tfn->tf", (Rk @ iRx)[:, 0], X)
+    return out
+
+
+def _cacgmm(X: np.ndarray, A: np.ndarray, n_iter: int, sharpness: float = 2.0) -> np.ndarray:
+    """Each bin's source shares (T, F, K): a complex angular central Gaussian mixture per
+    frequency (Ito, Araki and Nakatani 2016) over the bins' normalised vectors, started from
+    their coherence with the steering vectors ``A`` (F, M, K), so that source k is the same
+    source at every frequency."""
+    m = X.shape[-1]
+    Z = X.transpose(1, 0, 2)
+    Z = Z / (np.linalg.norm(Z, axis=-1, keepdims=True) + 1e-20)  # (F, T, M)
+    An = A / np.linalg.norm(A, axis=1, keepdims=True)
+    g = np.abs(np.einsum("fmk,ftm->ftk", np.conj(An), Z)) ** (2 * sharpness * m)
+    g /= g.sum(-1, keepdims=True) + 1e-20
+    quad = np.ones(g.shape)
+    for _ in range(n_iter):
+        B = np.einsum("ftk,ftm,ftn->fkmn", g / np.maximum(quad, 1e-10), Z, np.conj(Z))
+        B = m * B / np.maximum(np.trace(B, axis1=-2, axis2=-1).real, 1e-30)[..., None, None] + 1e-4 * np.eye(m)
+        quad = np.einsum("ftm,fkmn,ftn->ftk", np.conj(Z), np.linalg.inv(B), Z).real
+        ll = (np.log(g.mean(axis=1) + 1e-20)[:, None] - np.linalg.slogdet(B)[1][:, None]
+              - m * np.log(np.maximum(quad, 1e-10)))
+        g = np.exp(ll - ll.max(axis=-1, keepdims=True))
+        g /= g.sum(-1, keepdims=True)
+    return g.transpose(1, 0, 2)
+
+
+def _nmf(x: np.ndarray, k: int, n_iter: int, per_source: int = 8, nfft: int = 1024) -> np.ndarray:
+    """Single-channel separation by KL-NMF (see the module's docstring)."""
+    import scipy.cluster.hierarchy as hc
+
+    S = _stft(x[None], nfft)[:, :, 0]  # (T, F)
+    V = np.abs(S).T + 1e-9  # (F, T)
+    rng = np.random.default_rng(0)
+    r = k * per_source
+    W = rng.uniform(0.1, 1.0, (V.shape[0], r))
+    H = rng.uniform(0.1, 1.0, (r, V.shape[1]))
+    for _ in range(n_iter):
+        H *= (W.T @ (V / (W @ H))) / W.sum(axis=0)[:, None]
+        W *= ((V / (W @ H)) @ H.T) / H.sum(axis=1)[None]
+    act = np.log(H + 1e-9)
+    groups = hc.fcluster(hc.linkage(act, "average", metric="correlation"), k, "maxclust") - 1
+    parts = np.stack([W[:, groups == g] @ H[groups == g] if np.any(groups == g) else np.zeros_like(V)
+                      for g in range(k)])
+    masks = parts / (parts.sum(axis=0) + 1e-12)
+    Y = (masks * S.T[None]).transpose(2, 1, 0)  # (T, F, k)
+    return _istft(Y, len(x), nfft)

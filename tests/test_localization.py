@@ -1,0 +1,164 @@
+"""localization: real pyroomacoustics captures of a small room with two sources; bad input."""
+
+import numpy as np
+import pytest
+
+from vrecho.errors import VrechoError
+
+
+def _sir_gain(ref, est, mix):
+    import fast_bss_eval
+    import torch
+
+    def sir(e, perm):
+        return np.asarray(fast_bss_eval.bss_eval_sources(torch.as_tensor(ref), torch.as_tensor(e),
+                                                         compute_permutation=perm)[1])
+
+    return float(np.mean(sir(est, True) - sir(np.repeat(mix[None], len(ref), axis=0), False)))
+
+
+@pytest.fixture(scope="module")
+def two_sources():
+    """A 4.5 x 4 x 2.7 m room (RT60 0.3 s), speech and music, the headset at 8 poses on an arc."""
+    from localization.capture import FS, AmbientSource, Shoebox, simulate_walk_capture
+    from localization.sounds import ambient_sound
+    from vrecho.scene import DevicePose
+
+    rng = np.random.default_rng(3)
+    room = Shoebox((4.5, 4.0, 2.7), 0.3)
+    poses = []
+    for a in np.linspace(0.2 * np.pi, 1.3 * np.pi, 8):
+        p = np.array([2.25 + 1.1 * np.cos(a), 2.0 + 0.9 * np.sin(a), 1.6])
+        poses.append(DevicePose(p, [-np.sin(a), np.cos(a), 0.0], [0, 0, 1]))
+    sources = [AmbientSource(np.array([0.8, 0.7, 1.2]), ambient_sound("speech", 12, FS, rng), "speech"),
+               AmbientSource(np.array([3.7, 3.3, 0.9]), ambient_sound("music", 12, FS, rng), "music")]
+    return room, simulate_walk_capture(room, sources, poses, rng, segment_s=1.5)
+
+
+def test_both_sources_placed_and_separated(two_sources, tmp_path):
+    from scipy.optimize import linear_sum_assignment
+
+    from localization import place_sources, separate
+    from usd_export import write_scene
+
+    room, sim = two_sources
+    placed = place_sources(sim.captures, n_sources=2, bounds=((0, 0, 0), room.dims))
+    true = np.array([s.position for s in sim.sources])
+    est = np.array([p.position for p in placed])
+    D = np.linalg.norm(true[:, None] - est[None], axis=-1)
+    r, c = linear_sum_assignment(D)
+    assert np.all(D[r, c] < 0.5), D
+    for p in placed:
+        n, fade = sim.captures[0].audio.shape[1], int(0.05 * 16000)  # stretches joined by 50 ms crossfades
+        assert p.signal.shape == (n * len(sim.captures) - fade * (len(sim.captures) - 1),)
+        assert 0 < p.confidence <= 1 and p.uncertainty_m is not None and p.uncertainty_m < 1.0
+    # separation improves the signal-to-interference ratio on a capture
+    k = 4
+    y = separate(sim.captures[k], 2, "informed", positions=est)
+    assert _sir_gain(sim.images[k, :, 0], y, sim.captures[k].audio[0]) > 2.0
+    # and the placed sources feed usd_export
+    from pxr import Usd, UsdGeom
+
+    path = write_scene(tmp_path / "s.usda", (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]]), np.array([[0, 1, 2]])),
+                       sources=placed)
+    stage = Usd.Stage.Open(str(path))
+    xf = UsdGeom.Xformable(stage.GetPrimAtPath("/World/Sources/source_0"))
+    t = np.array(xf.ComputeLocalToWorldTransform(Usd.TimeCode.Default()).ExtractTranslation())
+    assert np.allclose(t, [est[0][0], est[0][2], -est[0][1]], atol=1e-3)  # Y up
+
+
+@pytest.mark.parametrize("method", ["auxiva", "nmf"])
+def test_blind_methods_separate(two_sources, method):
+    from localization import separate
+
+    _, sim = two_sources
+    cap = sim.captures[4]
+    y = separate(cap, 2, method)
+    assert y.shape == (2, cap.audio.shape[1]) and np.all(np.isfinite(y))
+    if method == "nmf":  # Wiener masks share out microphone 0 exactly (but the STFT's edges)
+        n = cap.audio.shape[1]
+        assert np.allclose(y.sum(axis=0)[1024:n - 1024], cap.audio[0, 1024:n - 1024], atol=1e-6)
+    else:
+        assert _sir_gain(sim.images[4, :, 0], y, cap.audio[0]) > 0.0
+
+
+def test_doa_one_capture(two_sources):
+    from localization import doa
+
+    _, sim = two_sources
+    d = doa(sim.captures[0], 2, "SRP", n_grid=500)
+    assert d.shape == (2, 3) and np.allclose(np.linalg.norm(d, axis=1), 1)
+
+
+def test_bad_input():
+    from localization import Capture, doa, locate, place_sources, separate
+
+    mics = np.array([[0, 0, 1.5], [0.1, 0, 1.5], [0, 0.1, 1.5], [0, 0, 1.6]])
+    x = np.random.default_rng(0).standard_normal((4, 8000))
+    with pytest.raises(VrechoError, match="different lengths"):
+        Capture([x[0], x[1][:7000], x[2], x[3]], 16000, mics)
+    silent = x.copy()
+    silent[2] = 0
+    with pytest.raises(VrechoError, match="channel 2 is silent"):
+        Capture(silent, 16000, mics)
+    with pytest.raises(VrechoError, match="unknown microphone geometry"):
+        Capture(x, 16000, None)
+    with pytest.raises(VrechoError, match="one per channel"):
+        Capture(x, 16000, mics[:3])
+    bad = x.copy()
+    bad[0, 5] = np.nan
+    with pytest.raises(VrechoError, match="NaN"):
+        Capture(bad, 16000, mics)
+    c = Capture(x, 16000, mics)
+    with pytest.raises(VrechoError, match="at most as many sources as microphones"):
+        separate(c, 5, "auxiva")
+    with pytest.raises(VrechoError, match="needs the sources' positions"):
+        separate(c, 2, "informed")
+    with pytest.raises(VrechoError, match="fewer sources than microphones"):
+        doa(c, 4, "MUSIC")
+    with pytest.raises(VrechoError, match="method"):
+        separate(c, 2, "magic")
+    one = Capture(x[:1], 16000, mics[:1])
+    with pytest.raises(VrechoError, match="at least 2"):
+        locate([one])
+    with pytest.raises(VrechoError, match="at most as many sources"):
+        separate(one, 2, "fastmnmf")
+    assert separate(one, 2, "nmf").shape == (2, 8000)  # the single-channel fallback
+    with pytest.raises(VrechoError, match="none given"):
+        place_sources([])
+    with pytest.raises(VrechoError, match="different sample rates"):
+        locate([c, Capture(np.tile(x, 3), 48000, mics)])
+
+
+def test_sounds():
+    from localization.sounds import KINDS, ambient_sound
+
+    for kind in KINDS + ("clap",):
+        a = ambient_sound(kind, 1.0, 16000, np.random.default_rng(1))
+        b = ambient_sound(kind, 1.0, 16000, np.random.default_rng(2))
+        assert a.shape == (16000,) and np.isclose(np.abs(a).max(), 0.8) and not np.allclose(a, b)
+    with pytest.raises(VrechoError, match="expected one of"):
+        ambient_sound("opera", 1.0, 16000, np.random.default_rng(0))
+
+
+def test_export_places_the_sources_it_hears(tmp_path, capsys):
+    """`vrecho export --sources heard`: the scene's source recorded along the walkthrough by the
+    headset, located, separated and written as spatial audio where it was heard."""
+    import json
+
+    from pxr import Usd, UsdGeom
+
+    from conftest import small_room
+    from vrecho.cli import main
+
+    scene_file = tmp_path / "small.json"
+    scene_file.write_text(json.dumps(small_room(sources=True).to_dict()))
+    out = tmp_path / "small.usda"
+    assert main(["export", str(scene_file), "--out", str(out), "--labels", "oracle", "--frames", "24",
+                 "--sources", "heard", "--quiet"]) == 0
+    assert "nearest true source" in capsys.readouterr().out
+    stage = Usd.Stage.Open(str(out))
+    sources = stage.GetPrimAtPath("/World/Sources").GetChildren()
+    at = [np.array(UsdGeom.Xformable(s).ComputeLocalToWorldTransform(Usd.TimeCode.Default()).ExtractTranslation())
+          for s in sources]
+    assert len(at) == 1 and np.linalg.norm(at[0] - [1.5, 1.1, -2.0]) < 0.5  # (x, z, -y) of the scene's source
