@@ -36,3 +36,16 @@ def small_room(sources: bool = False):
             {"wall": 1, "center_u_m": 1.8, "center_z_m": 1.3, "width_m": 0.9, "height_m": 1.2, "kind": "mirror"},
             {"wall": 2, "center_u_m": 2.1, "center_z_m": 1.4, "width_m": 1.0, "height_m": 1.0, "kind": "open"}],
         "sources": [{"position": [1.5, 2.0, 1.1], "sound": "voice"}] if sources else []})
+
+
+def export_small_room(tmp_path, out_name: str, sources: str) -> int:
+    """``vrecho export`` (in this process) of :func:`small_room` with its source, oracle labels, 24
+    frames, ``--sources`` as given, to ``tmp_path / out_name``; returns the exit status."""
+    import json
+
+    from vrecho.cli import main
+
+    scene_file = tmp_path / "small.json"
+    scene_file.write_text(json.dumps(small_room(sources=True).to_dict()))
+    return main(["export", str(scene_file), "--out", str(tmp_path / out_name), "--labels", "oracle", "--frames", "24",
+                 "--sources", sources, "--quiet"])

@@ -144,18 +144,12 @@ def test_sounds():
 def test_export_places_the_sources_it_hears(tmp_path, capsys):
     """`vrecho export --sources heard`: the scene's source recorded along the walkthrough by the
     headset, located, separated and written as spatial audio where it was heard."""
-    import json
-
     from pxr import Usd, UsdGeom
 
-    from conftest import small_room
-    from vrecho.cli import main
+    from conftest import export_small_room
 
-    scene_file = tmp_path / "small.json"
-    scene_file.write_text(json.dumps(small_room(sources=True).to_dict()))
     out = tmp_path / "small.usda"
-    assert main(["export", str(scene_file), "--out", str(out), "--labels", "oracle", "--frames", "24",
-                 "--sources", "heard", "--quiet"]) == 0
+    assert export_small_room(tmp_path, out.name, "heard") == 0
     assert "nearest true source" in capsys.readouterr().out
     stage = Usd.Stage.Open(str(out))
     sources = stage.GetPrimAtPath("/World/Sources").GetChildren()

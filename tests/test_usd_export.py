@@ -188,16 +188,10 @@ def test_export_command(tmp_path, capsys):
 
 
 def test_export_command_writes_a_clean_package(tmp_path, capsys):
-    import json
+    from conftest import export_small_room
 
-    from conftest import small_room
-    from vrecho.cli import main
-
-    scene_file = tmp_path / "small.json"
-    scene_file.write_text(json.dumps(small_room(sources=True).to_dict()))
     out = tmp_path / "small.usdz"
-    assert main(["export", str(scene_file), "--out", str(out), "--labels", "oracle", "--frames", "24",
-                 "--sources", "truth", "--quiet"]) == 0
+    assert export_small_room(tmp_path, out.name, "truth") == 0
     assert "no errors" in capsys.readouterr().out
     assert usd_export.validate(out) == []
     stage = Usd.Stage.Open(str(out))
