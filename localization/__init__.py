@@ -42,12 +42,10 @@ def place_sources(captures, n_sources: int | None = None, bounds=None, method: s
     from .locate import check_captures
 
     captures = check_captures(captures)
-    located = locate(captures, n_sources, bounds)
-    k = len(located.positions)
-    if method not in ("informed", "auxiva", "ilrma", "fastmnmf"):
+    if method not in ("informed", "auxiva", "ilrma", "fastmnmf"):  # before the work
         raise VrechoError(f"method: place_sources separates with informed, auxiva, ilrma or fastmnmf, got {method!r}")
-    if k > min(c.n_mics for c in captures):
-        raise VrechoError(f"{k} sources found but a capture has only {min(c.n_mics for c in captures)} microphones")
+    located = locate(captures, n_sources, bounds)
+    k = len(located.positions)  # separate refuses more sources than a capture has microphones
     fs = captures[0].fs
     fade = int(CROSSFADE_S * fs)
     tracks = [np.zeros(0) for _ in range(k)]
@@ -79,15 +77,12 @@ def _order_by_direction(capture: Capture, y: np.ndarray, positions: np.ndarray) 
     0, with the capture's delay-and-sum beam toward that position."""
     from scipy.optimize import linear_sum_assignment
 
-    from vrecho.acoustics import SPEED_OF_SOUND
+    from .separate import steering
 
     n = capture.audio.shape[1]
     spec = np.fft.rfft(capture.audio, axis=1)
-    f = np.fft.rfftfreq(n, 1 / capture.fs)
-    beams = []
-    for p in positions:
-        d = np.linalg.norm(capture.mics - p, axis=1)
-        beams.append(np.fft.irfft((spec * np.exp(2j * np.pi * f[None] * (d - d[0])[:, None] / SPEED_OF_SOUND)).mean(0), n))
+    A = steering(capture, positions, np.fft.rfftfreq(n, 1 / capture.fs))  # (F, M, K)
+    beams = np.fft.irfft(np.einsum("fmk,mf->kf", np.conj(A / np.abs(A)), spec) / capture.n_mics, n)
     score = np.abs(np.corrcoef(np.vstack([beams, y]))[:len(positions), len(positions):])
     _, cols = linear_sum_assignment(-score)
     return cols

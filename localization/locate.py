@@ -33,6 +33,8 @@ from vrecho.errors import VrechoError
 from .capture import Capture
 
 BAND_HZ = (200.0, 7000.0)
+NFFT = 512
+"""STFT length for direction finding (32 ms at 16 kHz), hop NFFT / 2."""
 MIN_SEPARATION_M = 0.75
 ONSET_FRAMES = 3
 ONSET_RATIO = 2.0
@@ -69,7 +71,7 @@ def check_captures(captures) -> list[Capture]:
     return captures
 
 
-def stft(audio: np.ndarray, nfft: int = 512) -> np.ndarray:
+def stft(audio: np.ndarray, nfft: int = NFFT) -> np.ndarray:
     """(M, F, T) short-time spectra, Hann window, hop nfft / 2."""
     hop = nfft // 2
     n = audio.shape[1]
@@ -79,7 +81,7 @@ def stft(audio: np.ndarray, nfft: int = 512) -> np.ndarray:
     return np.fft.rfft(frames, axis=-1).transpose(0, 2, 1)
 
 
-def _band(fs: int, nfft: int) -> np.ndarray:
+def _band(fs: int, nfft: int = NFFT) -> np.ndarray:
     f = np.fft.rfftfreq(nfft, 1 / fs)
     return (f >= BAND_HZ[0]) & (f <= min(BAND_HZ[1], 0.45 * fs))
 
@@ -133,12 +135,12 @@ def triangulate(centers: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray
     return x, float(np.sqrt(np.trace(np.linalg.inv(A)) * sigma2))
 
 
-def _pose_direction(votes: "_Votes", k: int, x: np.ndarray, cone_deg: float = 12.0) -> np.ndarray:
-    """Capture ``k``'s own best direction within ``cone_deg`` of the point ``x``."""
+def _pose_direction(votes: "_Votes", k: int, x: np.ndarray, sphere: np.ndarray, cone_deg: float = 12.0) -> np.ndarray:
+    """Capture ``k``'s own best direction among ``sphere``'s unit vectors within ``cone_deg`` of
+    the point ``x``."""
     c = votes.captures[k].center
     u0 = (x - c) / np.linalg.norm(x - c)
-    dirs = _sphere(40000)
-    dirs = dirs[dirs @ u0 > np.cos(np.radians(cone_deg))]
+    dirs = sphere[sphere @ u0 > np.cos(np.radians(cone_deg))]
     return dirs[int(np.argmax(votes.lookup(k, dirs)))]
 
 
@@ -165,11 +167,11 @@ class _Votes:
         A, E = np.meshgrid(self.az, self.el, indexing="ij")
         self.dirs = np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], -1).reshape(-1, 3)
         fs = captures[0].fs
-        band = _band(fs, 512)
-        freqs = np.fft.rfftfreq(512, 1 / fs)[band]
+        band = _band(fs)
+        freqs = np.fft.rfftfreq(NFFT, 1 / fs)[band]
         self.votes, self.weights = [], []
         for c in captures:
-            X = stft(c.audio, 512)[:, band].astype(np.complex64)  # (M, F, T)
+            X = stft(c.audio)[:, band].astype(np.complex64)  # (M, F, T)
             energy = (np.abs(X) ** 2).sum(axis=0)  # (F, T)
             before = np.full_like(energy, np.inf)
             before[:, ONSET_FRAMES:] = np.stack([energy[:, ONSET_FRAMES - i:energy.shape[1] - i]
@@ -234,6 +236,7 @@ def locate(captures, n_sources: int | None = None, bounds=None, step_m: float = 
     lo, hi = search_box(captures, bounds)
     grid = _grid(lo, hi, step_m)
     votes = _Votes(captures)
+    every_vote = votes.maps  # kept for each capture's own direction once the sources are found
     found, strength = [], []
     limit = n_sources or max_sources
     while len(found) < limit:
@@ -247,14 +250,14 @@ def locate(captures, n_sources: int | None = None, bounds=None, step_m: float = 
         found.append(x)
         strength.append(float(votes.power(x[None])[0]))
         votes.explain(x)
-    votes.weights = [np.ones_like(w) for w in votes.weights]  # every vote back, for each capture's own direction
-    votes._maps()
+    votes.maps = every_vote
     centers = np.array([c.center for c in captures])
     positions = np.array(found).reshape(-1, 3)
     unc = np.full(len(found), np.nan)
     if len(captures) >= 3:
+        sphere = _sphere(40000)
         for i, x in enumerate(positions):
-            rays = np.array([_pose_direction(votes, k, x) for k in range(len(captures))])
+            rays = np.array([_pose_direction(votes, k, x, sphere) for k in range(len(captures))])
             unc[i] = triangulate(centers, rays)[1]
     d = positions[None] - centers[:, None]
     return Located(positions, unc, np.array(strength) / strength[0], d / np.linalg.norm(d, axis=-1, keepdims=True))
@@ -275,12 +278,12 @@ def doa(capture: Capture, n_sources: int, method: str = "NormMUSIC", n_grid: int
         raise VrechoError(f"{method} finds fewer sources than microphones: {n_sources} sources with "
                           f"{capture.n_mics} microphones")
     L = (capture.mics - capture.center).T
-    X = stft(capture.audio, 512)
-    d = pra.doa.algorithms[method](L, capture.fs, 512, c=SPEED_OF_SOUND, num_src=n_sources, dim=3, n_grid=n_grid)
+    X = stft(capture.audio)
+    d = pra.doa.algorithms[method](L, capture.fs, NFFT, c=SPEED_OF_SOUND, num_src=n_sources, dim=3, n_grid=n_grid)
     if n_freq is None:
         d.locate_sources(X, freq_range=list(BAND_HZ))
     else:
-        bins = np.flatnonzero(_band(capture.fs, 512))
+        bins = np.flatnonzero(_band(capture.fs))
         d.locate_sources(X, freq_bins=bins[np.linspace(0, len(bins) - 1, n_freq).round().astype(int)])
     az, col = np.asarray(d.azimuth_recon), np.asarray(d.colatitude_recon)
     out = np.stack([np.cos(az) * np.sin(col), np.sin(az) * np.sin(col), np.cos(col)], -1)
