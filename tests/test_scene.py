@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from vrecho.errors import VrechoError
-from vrecho.scene import (DEPTH_RANGE_M, MAX_INCIDENCE_DEG, Scene, builtin_scene, face, load_scene,
-                          random_scene)
+from vrecho.scene import (DEPTH_RANGE_M, MAX_INCIDENCE_DEG, MIC_ABOVE_EMITTER_M, Scene, builtin_scene, face,
+                          load_scene, random_scene, walkthrough_path)
 
 
 def test_json_round_trip_is_exact(tmp_path):
@@ -32,6 +32,30 @@ def test_random_scenes_follow_the_protocol(seed):
         foot = pose.emitter + scene.depth_m(pose) * normal
         u0, u1, z0, z1 = d.bounds()
         assert u0 <= np.dot(foot - origin, u) <= u1 and z0 <= foot[2] <= z1
+
+
+def test_the_walkthrough_listens_to_each_discontinuity_clear_of_other_echoes():
+    clear = []
+    for seed in range(8):
+        scene = random_scene(np.random.default_rng([3000, seed]), n_discontinuities=(2, 3))
+        path, room = walkthrough_path(scene), scene.room
+        for d in scene.discontinuities:
+            origin, u, normal = room.wall_frame(d.wall)
+            u0, u1, z0, z1 = d.bounds()
+            if u0 < 0.4 or u1 > room.wall_lengths[d.wall] - 0.4 or z1 - z0 < 0.3 or z0 > 1.6:
+                continue  # in a corner (no room to stand in front) or out of reach
+            stands = []
+            for pos in path.positions:
+                e = pos - [0, 0, MIC_ABOVE_EMITTER_M]
+                dist = float(np.dot(origin - e, normal))
+                foot = e + dist * normal  # where the loudspeaker's echo comes from
+                if 0.5 < dist < 2.3 and u0 + 0.1 <= np.dot(foot - origin, u) <= u1 - 0.1 and z0 + 0.1 <= foot[2] <= z1 - 0.1:
+                    walls = [room.wall_frame(v) for v in range(len(room.wall_lengths)) if v != d.wall]
+                    others = [e[2], room.height_m - e[2]] + [abs(float(np.dot(e - o, n))) for o, _, n in walls]
+                    stands.append(min(abs(np.array(others) - dist)))
+            assert stands, (seed, d, path.positions)
+            clear.append(max(stands) >= 0.35)
+    assert np.mean(clear) >= 0.6, clear  # mostly, the floor's, the ceiling's and the walls' echoes come apart
 
 
 def test_patches_tile_each_wall():

@@ -791,34 +791,75 @@ def _random_pose(scene: Scene, index: int, rng: np.random.Generator) -> DevicePo
     return None
 
 
-def walkthrough_path(scene: Scene, distance_m: float = 1.6, height_m: float = 1.5, duration_s: float = 40.0) -> CameraPath:
+def walkthrough_path(scene: Scene, distance_m: float = 1.6, height_m: float = 1.5, duration_s: float = 40.0,
+                     reach_m: tuple[float, float] = (0.8, 1.9), clear_m: float = 0.35) -> CameraPath:
     """A camera path around a room that looks at every wall, and squarely at each discontinuity.
 
-    Keyframes in the footprint's order: ``distance_m`` in front of each discontinuity (or of the
-    middle of a wall without one), looking at its centre, then tilting down to its foot and up
-    to its top where they lie beyond the band a camera holds from there (about 0.9 to 2.1 m
-    high); pulled in where the room is too narrow. What a person scanning the room would do; the
-    scenes of :func:`random_scene` have no path of their own.
+    Keyframes in the footprint's order: in front of each discontinuity (or of the middle of a
+    wall without one), looking at its centre, then tilting down to its foot and up to its top
+    where they lie beyond what the camera holds from there. Where to stand (:func:`_stand`):
+    near ``distance_m`` and ``height_m``, so that the device's loudspeaker faces the
+    discontinuity itself (its echo comes back from the foot of the loudspeaker's perpendicular:
+    only there does the echo speak of it; see :func:`vrecho.reconstruct.infer`), with no other
+    surface (floor, ceiling, another wall) at the same distance within ``clear_m`` (their echoes
+    would drown an opening's silence), and with the whole discontinuity in the camera's view.
+    What a person scanning the room would do; the scenes of :func:`random_scene` have no path of
+    their own.
     """
     room = scene.room
     positions, targets = [], []
     for w, length in enumerate(room.wall_lengths):
         origin, u, normal = room.wall_frame(w)
         ds = sorted((d for d in scene.discontinuities if d.wall == w), key=lambda d: d.center_u_m)
-        looks = [(d.center_u_m, d.bounds()[2:]) for d in ds] or [(length / 2, (1.0, 1.6))]
-        for u_m, (z0, z1) in looks:
+        looks = [(d.center_u_m, d.width_m, d.bounds()[2:]) for d in ds] or [(length / 2, 0.0, (1.0, 1.6))]
+        for u_m, width, (z0, z1) in looks:
             centre = origin + u_m * u
-            for dist in np.linspace(distance_m, 0.6, 11):
-                pos = np.r_[(centre - dist * normal)[:2], height_m]
-                if room.contains(pos[None], margin_m=0.4)[0]:
-                    break
-            tilts = [z for z, beyond in ((z0 + 0.3, z0 < 0.9), (z1 - 0.3, z1 > 2.1)) if beyond]
-            for z_m in [np.clip((z0 + z1) / 2, 0.8, 1.8)] + tilts:
+            pos, dist = _stand(room, w, centre, width, z0, z1, distance_m, height_m, reach_m, clear_m)
+            band = min(0.6, 0.35 * dist)  # what the camera holds above and below its axis, with a margin
+            tilts = [z for z, beyond in ((z0 + 0.3, z0 < pos[2] - band), (z1 - 0.3, z1 > pos[2] + band)) if beyond]
+            # Looking at the centre, but not so steeply that the camera no longer faces it.
+            level = np.clip((z0 + z1) / 2, pos[2] - min(0.7, 0.35 * dist), pos[2] + min(0.3, 0.35 * dist))
+            for z_m in [level] + tilts:
                 positions.append(pos)
                 targets.append(centre + np.array([0.0, 0.0, z_m]))
     positions.append(positions[0])
     targets.append(targets[0])
     return CameraPath(np.round(positions, 3), np.round(targets, 3), duration_s)
+
+
+def _stand(room: Room, w: int, centre: np.ndarray, width: float, z0: float, z1: float, distance_m: float,
+           height_m: float, reach_m: tuple[float, float], clear_m: float,
+           fov_deg: float = 65.0) -> tuple[np.ndarray, float]:
+    """Where a person scanning stands to face the point ``centre`` (at floor level) of wall
+    ``w``, for a discontinuity ``width`` wide from ``z0`` to ``z1`` high: the camera's position
+    and its distance from the wall. Of the places 0.4 m inside the room, heights within reach
+    and distances from 0.6 m to 0.6 m beyond ``distance_m``, the first by: the whole width in
+    view (a ``fov_deg`` camera, 15 cm to spare each side), the distance clear of every other
+    surface's (see :func:`walkthrough_path`), then nearest ``distance_m`` and ``height_m``.
+    The loudspeaker (:data:`MIC_ABOVE_EMITTER_M` below the camera) stays 15 cm inside the
+    discontinuity's height where it can."""
+    _, _, normal = room.wall_frame(w)
+    lo, hi = max(z0 + 0.15, reach_m[0] - MIC_ABOVE_EMITTER_M), min(z1 - 0.15, reach_m[1] - MIC_ABOVE_EMITTER_M)
+    if lo > hi:  # too small or out of reach: as near its middle as the arm goes
+        lo = hi = float(np.clip((z0 + z1) / 2, reach_m[0] - MIC_ABOVE_EMITTER_M, reach_m[1] - MIC_ABOVE_EMITTER_M))
+    emitters = np.unique(np.r_[np.clip(height_m - MIC_ABOVE_EMITTER_M, lo, hi), np.arange(lo, hi + 1e-9, 0.05)])
+    others = [(room.wall_frame(v)[0], room.wall_frame(v)[2]) for v in range(len(room.wall_lengths)) if v != w]
+    half_view = np.tan(np.radians(fov_deg / 2))
+    best = None
+    for dist in np.arange(0.6, distance_m + 0.65, 0.1):
+        xy = (centre - dist * normal)[:2]
+        if not room.contains(np.r_[xy, 1.0][None], margin_m=0.4)[0]:
+            continue
+        walls = [abs(float(n[:2] @ (xy - o[:2]))) for o, n in others]
+        for e in emitters:
+            echoes = np.array(walls + [e, room.height_m - e])
+            key = (dist * half_view < width / 2 + 0.15, np.min(np.abs(echoes - dist)) < clear_m,
+                   abs(dist - distance_m) + abs(e + MIC_ABOVE_EMITTER_M - height_m))
+            if best is None or key < best[0]:
+                best = (key, np.r_[xy, e + MIC_ABOVE_EMITTER_M], float(dist))
+    if best is None:  # no room to stand 0.4 m inside: as far out as the room allows
+        return np.r_[(centre - 0.6 * normal)[:2], np.clip(height_m, *reach_m)], 0.6
+    return best[1], best[2]
 
 
 def builtin_scene() -> Scene:
