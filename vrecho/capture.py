@@ -15,7 +15,8 @@ door slam or lost to a dropout, the microphone clips. :func:`find_onsets` finds 
    re-estimated from the onsets so far (drift): the candidate within ``tolerance_s`` of where the
    next pulse is due is taken; where none is, the pulse is missing (and the next is looked for
    one more period on). A stronger echo is not taken for the direct sound: the onset is the
-   earliest lag within 20 ms before the peak whose envelope reaches half of it.
+   highest lag within a quarter millisecond of the first, within 20 ms before the peak, whose
+   envelope reaches half of it.
 4. **Sub-sample time.** A parabola through the envelope's three samples at the peak.
 """
 
@@ -155,12 +156,11 @@ def find_onsets(audio, fs: int = FS, emitted=None, period_s: float = PERIOD_S, m
     ks = np.array(sorted(onsets))
     idx = np.array([onsets[k] for k in ks])
     # The direct sound is the first strong arrival: an echo may outdo it by a little.
-    lead = int(0.02 * fs)
+    lead, lobe = int(0.02 * fs), max(int(0.00025 * fs), 3)  # a quarter millisecond: past the main lobe, before any echo
     for j, i in enumerate(idx):
         w = env[max(i - lead, 0):i + 1]
-        idx[j] = max(i - lead, 0) + int(np.flatnonzero(w >= 0.5 * env[i])[0])
-        while idx[j] + 1 < env.size and env[idx[j] + 1] > env[idx[j]]:  # climb to that arrival's own peak
-            idx[j] += 1
+        first = max(i - lead, 0) + int(np.flatnonzero(w >= 0.5 * env[i])[0])
+        idx[j] = first + int(np.argmax(env[first:first + lobe]))  # that arrival's own peak
     a, b, c = env[np.maximum(idx - 1, 0)], env[idx], env[np.minimum(idx + 1, env.size - 1)]
     den = a - 2 * b + c
     frac = np.where(den < 0, 0.5 * (a - c) / np.where(den < 0, den, -1.0), 0.0)
@@ -198,6 +198,110 @@ def cut_frames(audio, onsets: Onsets, length_s: float = 1.0, mic_offset_m: float
         seg = np.fft.irfft(np.fft.rfft(seg) * np.exp(2j * np.pi * f * (t - i)), seg.size)  # advance by the fraction
         frames.append(seg[pad:pad + n])
     return np.array(frames, np.float32).reshape(-1, n)
+
+
+def read_video(path) -> tuple[np.ndarray, int, np.ndarray]:
+    """A video's sound and the times of its pictures, decoded with PyAV (FFmpeg's libraries).
+
+    Returns the first audio stream mixed to mono (float32, its own rate), the rate (Hz), and
+    each video frame's presentation time (s, from the audio's start). One :class:`VrechoError`
+    for a file that is not a video, a codec FFmpeg cannot decode, or a video without sound."""
+    import av
+
+    path = str(path)
+    try:
+        with av.open(path) as container:
+            if not container.streams.audio:
+                raise VrechoError(f"{path}: the video has no audio track; vrecho needs the microphone's recording "
+                                  "of its pulses (or give --audio WAV)")
+            astream = container.streams.audio[0]
+            chunks, times, a0 = [], [], None
+            streams = [astream] + list(container.streams.video[:1])
+            for packet in container.demux(streams):
+                for frame in packet.decode():
+                    if packet.stream.type == "audio":
+                        if a0 is None:
+                            a0 = float(frame.time or 0.0)
+                        raw = frame.to_ndarray()
+                        a = raw.astype(np.float32)
+                        if frame.format.is_planar:
+                            a = a.mean(axis=0)
+                        else:  # interleaved: (1, n * channels)
+                            a = a.reshape(-1, len(frame.layout.channels)).mean(axis=1)
+                        if np.issubdtype(raw.dtype, np.integer):
+                            a /= float(np.iinfo(raw.dtype).max)
+                        chunks.append(a)
+                    elif frame.time is not None:
+                        times.append(float(frame.time))
+            fs = int(astream.rate)
+    except av.FFmpegError as e:
+        raise VrechoError(f"{path}: cannot decode it ({e}); expected a video FFmpeg reads (MP4/MOV/MKV with "
+                          "H.264/HEVC and AAC/PCM/FLAC sound)") from None
+    if not chunks:
+        raise VrechoError(f"{path}: the audio track holds no samples")
+    return np.concatenate(chunks), fs, np.array(sorted(times)) - (a0 or 0.0)
+
+
+def video_images(path, times_s) -> np.ndarray:
+    """Grayscale pictures (K, H, W) uint8 of a video at the given times (the frame shown then:
+    the last one that started), decoded in one pass."""
+    import av
+
+    times_s = np.asarray(times_s, float)
+    out = [None] * len(times_s)
+    order = np.argsort(times_s)
+    k, last, t0 = 0, None, None
+    with av.open(str(path)) as container:
+        a = container.streams.audio
+        for frame in container.decode(video=0):
+            if t0 is None:
+                t0 = float(a[0].start_time * a[0].time_base) if a and a[0].start_time is not None else 0.0
+            t = float(frame.time) - t0
+            while k < len(order) and times_s[order[k]] < t:
+                out[order[k]] = (last if last is not None else frame).to_ndarray(format="gray")
+                k += 1
+            if k == len(order):
+                break
+            last = frame  # converted only if a time falls in it
+    for j in order[k:]:
+        out[j] = last.to_ndarray(format="gray")
+    return np.stack(out)
+
+
+def write_video(path, gray: np.ndarray, fps: float, audio: np.ndarray, fs: int, audio_codec: str = "flac",
+                audio_bit_rate: int = 256_000) -> None:
+    """Mux grayscale pictures (K, H, W) uint8 at ``fps`` and a mono sound (float in [-1, 1]) into
+    a video file with PyAV (H.264; the sound as ``audio_codec``: "flac" in MKV is lossless,
+    "aac" in MP4 is what phones write, at ``audio_bit_rate``). For simulated captures and tests."""
+    import av
+    from fractions import Fraction
+
+    gray = np.asarray(gray, np.uint8)
+    with av.open(str(path), "w") as container:
+        v = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1000))
+        v.width, v.height, v.pix_fmt = gray.shape[2], gray.shape[1], "yuv420p"
+        a = container.add_stream(audio_codec, rate=fs, layout="mono")
+        if audio_codec != "flac":
+            a.bit_rate = audio_bit_rate
+        pcm = np.clip(np.asarray(audio, np.float32), -1, 1)
+        fmt = "s16" if audio_codec == "flac" else "fltp"
+        block = 1024
+        for k in range(0, len(pcm), block):
+            chunk = pcm[k:k + block][None]
+            frame = av.AudioFrame.from_ndarray((chunk * 32767).astype(np.int16) if fmt == "s16" else chunk,
+                                               format=fmt, layout="mono")
+            frame.sample_rate, frame.pts = fs, k
+            for packet in a.encode(frame):
+                container.mux(packet)
+        for packet in a.encode(None):
+            container.mux(packet)
+        for i, g in enumerate(gray):
+            frame = av.VideoFrame.from_ndarray(np.repeat(g[..., None], 3, axis=2), format="rgb24")
+            frame.pts = i
+            for packet in v.encode(frame):
+                container.mux(packet)
+        for packet in v.encode(None):
+            container.mux(packet)
 
 
 def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, fs: int = FS, emitted=None,
@@ -244,3 +348,79 @@ def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, 
     truth = starts + offset
     truth[list(dropped)] = np.nan
     return x.astype(np.float32), truth
+
+
+def run(out, video=None, audio=None, classifier=None) -> list[dict]:
+    """``vrecho capture``: find the pulses of a capture (a video, or a sound file), cut its frames,
+    ask EchoCNN about each (the probe known: EchoCNN-E), and write ``frames.csv`` (one row per
+    frame: its time in the recording, the answers and their probabilities), ``images.npz`` (the
+    video's picture at each frame's time) and ``capture.png`` (the recording with the pulses
+    found and the answers). Returns the rows."""
+    import csv
+
+    import soundfile as sf
+
+    from .classifier import load_classifier
+    from .io import ensure_writable_dir
+    from .signals import probe
+
+    if (video is None) == (audio is None):
+        raise VrechoError("capture: give a video, or --audio with a sound file (not both)")
+    if audio is not None:
+        try:
+            x, fs = sf.read(str(audio), dtype="float32", always_2d=True)
+        except (sf.LibsndfileError, RuntimeError) as e:
+            raise VrechoError(f"{audio}: cannot read it as sound ({e}); expected WAV or FLAC") from None
+        x = x.mean(axis=1)
+    else:
+        x, fs, _ = read_video(video)
+    out = ensure_writable_dir(out)
+    onsets = find_onsets(x, fs)
+    frames = cut_frames(x, onsets)
+    if not len(frames):
+        raise VrechoError("capture: no pulse has a whole second of recording after it")
+    clf = load_classifier() if classifier is None else classifier
+    preds = clf.predict_batch(frames, FS, None, probe(FS))
+    times = onsets.seconds[:len(frames)]
+    rows = [{"frame": k, "time_s": round(float(t), 6), "open": p.is_open, "material": "-" if p.is_open else p.material,
+             "depth_m": round(float(p.depth_m), 4), "p_open": round(p.probabilities["open"], 4),
+             "p_mirror": round(p.probabilities["mirror"], 4), "confidence": round(p.confidence, 4),
+             "flags": " ".join(p.flags)} for k, (t, p) in enumerate(zip(times, preds))]
+    with open(out / "frames.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    if video is not None:
+        np.savez_compressed(out / "images.npz", time_s=times, gray=video_images(video, times))
+    _figure(x, fs, onsets, rows, out / "capture.png")
+    return rows
+
+
+def _figure(x, fs, onsets: Onsets, rows: list[dict], path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = np.arange(len(x)) / fs
+    fig, (a, b) = plt.subplots(2, 1, figsize=(11, 5), sharex=True)
+    step = max(len(x) // 200_000, 1)
+    a.plot(t[::step], x[::step], lw=0.4, color="0.3")
+    for s in onsets.seconds:
+        a.axvline(s, color="tab:green", lw=0.8)
+    for m in onsets.missing / fs:
+        a.axvline(m, color="tab:red", lw=1.2, ls="--")
+    a.set_ylabel("recording")
+    a.set_title(f"{len(onsets.samples)} pulses found (green), {len(onsets.missing)} missing (red); "
+                f"period {onsets.period_s:.5f} s")
+    times = [r["time_s"] for r in rows]
+    b.scatter(times, [1 - r["p_open"] for r in rows], c=["tab:blue" if not r["open"] else "tab:orange" for r in rows],
+              s=14, label="p(closed)")
+    b.plot(times, [r["depth_m"] / 3 for r in rows], color="tab:gray", lw=0.8, label="depth / 3 m")
+    b.set_ylim(-0.05, 1.05)
+    b.set_xlabel("time (s)")
+    b.set_ylabel("EchoCNN")
+    b.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

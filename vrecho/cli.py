@@ -109,6 +109,17 @@ def _heard(scene, seed: int, progress: bool) -> list:
     return placed
 
 
+def _capture(args) -> int:
+    from .capture import run
+
+    rows = run(args.out, args.video, args.audio)
+    n_open = sum(r["open"] for r in rows)
+    print(f"{len(rows)} frames: {n_open} open, {len(rows) - n_open} closed "
+          f"({sum(r['material'] == 'mirror' for r in rows)} mirror)")
+    print(f"written to {args.out}: frames.csv, capture.png" + (", images.npz" if args.video else ""))
+    return 0
+
+
 def _demo(args) -> int:
     from .listen import run_demo
 
@@ -194,6 +205,15 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--seed", type=int, default=0, help="seed of the simulated recordings (default: 0)")
     x.add_argument("--quiet", action="store_true", help="no progress bars")
     x.set_defaults(func=_export)
+
+    c = sub.add_parser("capture", help="a phone's capture (video, or sound file): pulses, frames, EchoCNN's answers",
+                       description="Decode a capture (PyAV), find vrecho's pulses in its sound, cut PROTOCOL.md's "
+                                   "1 s frames and ask EchoCNN about each; writes frames.csv, capture.png and the "
+                                   "video's picture at each frame (images.npz).")
+    c.add_argument("video", type=Path, nargs="?", default=None, help="the video (MP4, MOV, MKV) with its sound")
+    c.add_argument("--audio", type=Path, default=None, help="a sound file (WAV, FLAC) instead of a video")
+    c.add_argument("--out", type=Path, required=True, help="output folder")
+    c.set_defaults(func=_capture)
 
     d = sub.add_parser("demo", help="run vrecho on its built-in living room",
                        description="Simulate the built-in scene (or --scene FILE): what the device hears in "
