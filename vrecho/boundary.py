@@ -51,6 +51,7 @@ import numpy as np
 
 from .acoustics import SPEED_OF_SOUND
 from .errors import VrechoError
+from .signals import parabolic_peaks
 
 
 def ranging_probe(fs: int, duration_s: float = 0.005, f0: float = 4000.0, f1: float = 20000.0) -> np.ndarray:
@@ -361,7 +362,7 @@ class BoundaryMonitor:
         if not len(head):
             return None
         d0 = int(np.argmax(head))
-        direct = float(_parabolic(env, np.array([d0]))[0])
+        direct = float(parabolic_peaks(env, np.array([d0]))[0])
         if self._direct_delay is None:
             self._direct_delay = direct
         elif 0.5 < abs(direct - self._direct_delay) <= 3:  # drift; a larger jump is a stray peak: kept out
@@ -382,7 +383,7 @@ class BoundaryMonitor:
         if not len(peaks):
             return []
         s = self.mic_offset_m
-        path = SPEED_OF_SOUND * (_parabolic(env, peaks) - ref) / self.fs + s
+        path = SPEED_OF_SOUND * (parabolic_peaks(env, peaks) - ref) / self.fs + s
         d = 0.5 * np.sqrt(np.maximum(path ** 2 - s ** 2, 0.0))
         ok = (path > s) & (d >= self.min_range_m) & (d <= self.max_range_m)
         return _merge(list(zip(d[ok].tolist(), (env[peaks][ok] / peak_direct).tolist())), 0.03)
@@ -464,16 +465,6 @@ class BoundaryMonitor:
             conf = float(np.clip(min(len(tr.dists), 10) / 10 * min(1.0, np.mean(tr.strengths) * 200), 0, 1))
             self._alert = Alert(level, float(d), "closed", conf, float(closing), None if np.isinf(ttc) else float(ttc),
                                 (), float(at))
-
-
-def _parabolic(y: np.ndarray, i: np.ndarray) -> np.ndarray:
-    """Peaks' positions to a fraction of a sample (a parabola through three samples; a peak at
-    either end of ``y`` stays where it is)."""
-    inner = (i > 0) & (i < len(y) - 1)
-    a, b, c = y[np.maximum(i - 1, 0)], y[i], y[np.minimum(i + 1, len(y) - 1)]
-    den = a - 2 * b + c
-    bend = inner & (den < 0)
-    return i + np.where(bend, 0.5 * (a - c) / np.where(bend, den, -1.0), 0.0)
 
 
 def _merge(echoes, within_m: float):

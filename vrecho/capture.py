@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import VrechoError
-from .signals import FS, PERIOD_S
+from .signals import FS, PERIOD_S, parabolic_peaks
 
 
 @dataclass
@@ -161,10 +161,7 @@ def find_onsets(audio, fs: int = FS, emitted=None, period_s: float = PERIOD_S, m
         w = env[max(i - lead, 0):i + 1]
         first = max(i - lead, 0) + int(np.flatnonzero(w >= 0.5 * env[i])[0])
         idx[j] = first + int(np.argmax(env[first:first + lobe]))  # that arrival's own peak
-    a, b, c = env[np.maximum(idx - 1, 0)], env[idx], env[np.minimum(idx + 1, env.size - 1)]
-    den = a - 2 * b + c
-    frac = np.where(den < 0, 0.5 * (a - c) / np.where(den < 0, den, -1.0), 0.0)
-    samples = idx + frac
+    samples = parabolic_peaks(env, idx)
     period_fit = float(np.polyfit(ks, samples, 1)[0]) / fs
     # Only gaps the found pulses straddle are missing pulses (not the recording's ends).
     missing = np.array(sorted(m for m in missing if samples[0] < m < samples[-1]))
@@ -338,8 +335,7 @@ def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, 
         emission[i:i + m] += pulse[:n - i]
     x = np.fft.irfft(np.fft.rfft(emission, 2 * n) * np.fft.rfft(ir, 2 * n), 2 * n)[:n]
     direct = int(np.argmax(np.abs(ir) > 0.5 * np.abs(ir).max()))  # the first strong arrival
-    h = np.abs(ir[max(direct - 1, 0):direct + 2])  # its sub-sample time: a parabola
-    offset = direct + (0.5 * (h[0] - h[2]) / (h[0] - 2 * h[1] + h[2]) if len(h) == 3 and h[0] - 2 * h[1] + h[2] < 0 else 0.0)
+    offset = float(parabolic_peaks(np.abs(ir), np.array([direct]))[0])  # its sub-sample time
     amp = float(np.abs(ir).max())
     x = _microphone(x, s, amp, rng, snr_db, 80.0, 0.0).astype(np.float64)
     if clip is not None:

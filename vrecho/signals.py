@@ -197,3 +197,13 @@ def pulse_train(sound: np.ndarray, n_periods: int, fs: int = FS) -> np.ndarray:
     for k in range(n_periods):
         out[k * period:k * period + sound.size] = sound
     return out
+
+
+def parabolic_peaks(y: np.ndarray, i: np.ndarray) -> np.ndarray:
+    """Peaks' positions to a fraction of a sample (a parabola through three samples; a peak at
+    either end of ``y`` stays where it is)."""
+    inner = (i > 0) & (i < len(y) - 1)
+    a, b, c = y[np.maximum(i - 1, 0)], y[i], y[np.minimum(i + 1, len(y) - 1)]
+    den = a - 2 * b + c
+    bend = inner & (den < 0)
+    return i + np.where(bend, 0.5 * (a - c) / np.where(bend, den, -1.0), 0.0)
