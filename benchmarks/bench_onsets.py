@@ -7,7 +7,9 @@ each, pyroomacoustics impulse responses; seed 9000, never used while building th
 a phone makes them: vrecho's probe every second, the clocks drifting by up to 0.5 %, the train
 starting at a random fraction of a sample, pink noise 10 to 40 dB below the direct sound, and in
 each condition: clean, clipped at 0.3 of the direct sound's peak, two pulses not played, and
-all of these at once. A pulse is found when an onset lies within 5 ms of its direct sound's
+all of these at once; and with other sounds in the room: five hand claps as loud as the direct
+sound at random times ("claps"), and speech-like voice and whistles (the protocol's sounds,
+looped) 6 dB below the direct sound's peak ("talk"). A pulse is found when an onset lies within 5 ms of its direct sound's
 arrival; the error is that onset's distance from the arrival, in samples (44.1 kHz). A false
 pulse is an onset more than 5 ms from every pulse played. Prints one table.
 """
@@ -21,14 +23,32 @@ import time
 import numpy as np
 from tqdm import tqdm
 
-from vrecho.acoustics import device_impulse_response
+from vrecho.acoustics import MIC_SENSITIVITY, device_impulse_response
 from vrecho.capture import find_onsets, simulate_recording
 from vrecho.errors import VrechoError
 from vrecho.scene import random_scene
-from vrecho.signals import FS
+from vrecho.signals import FS, emitted_sound, probe
 
 CONDITIONS = {"clean": {}, "clipped": {"clip": 0.3}, "2 dropped": {"dropped": 2},
-              "all": {"clip": 0.3, "dropped": 2}}
+              "all": {"clip": 0.3, "dropped": 2}, "claps": {"claps": 5}, "talk": {"talk": 0.5}}
+
+
+def interference(n: int, level: float, rng: np.random.Generator, claps: int = 0, talk: float = 0.0) -> np.ndarray:
+    """Other sounds of a room: ``claps`` hand claps with peak ``level`` at random times, and a bed
+    of voice and whistle pulses back to back with peak ``talk * level``."""
+    out = np.zeros(n)
+    for _ in range(claps):
+        c = emitted_sound("clap", FS, rng)
+        i = int(rng.integers(0, n - c.size))
+        out[i:i + c.size] += level * c / np.abs(c).max()
+    if talk:
+        i = 0
+        while i < n:
+            c = emitted_sound(str(rng.choice(["voice", "whistle"])), FS, rng)
+            c = c[:n - i]
+            out[i:i + c.size] += talk * level * c / np.abs(c).max()
+            i += c.size
+    return out
 
 
 def main() -> None:
@@ -47,6 +67,9 @@ def main() -> None:
                 dropped = tuple(rng.choice(np.arange(1, args.pulses - 1), cond.get("dropped", 0), replace=False))
                 x, truth = simulate_recording(ir, args.pulses, rng, snr_db=snr, drift=float(rng.uniform(-0.005, 0.005)),
                                               clip=cond.get("clip"), dropped=dropped)
+                if "claps" in cond or "talk" in cond:
+                    level = MIC_SENSITIVITY * np.abs(ir).max() * np.abs(probe()).max()  # the direct sound's peak
+                    x = x + interference(len(x), level, rng, cond.get("claps", 0), cond.get("talk", 0.0)).astype(np.float32)
                 t = time.perf_counter()
                 try:
                     found = find_onsets(x, FS).samples

@@ -120,3 +120,91 @@ def test_bad_captures_are_one_clear_error(tmp_path):
         with pytest.raises(VrechoError, match=message):
             run(tmp_path / "o", video, audio)
     assert main(["capture", str(mute), "--out", str(tmp_path / "o2")]) == 2
+
+
+# -- A posed capture: COLMAP's poses and the user's mesh, repaired --------------------------------
+
+@pytest.fixture(scope="module")
+def posed(tmp_path_factory):
+    """The small room's capture as a user brings it: a video (pictures and the pulses' sound,
+    each pulse heard where the device then was), COLMAP's poses of its pictures, the scan's mesh."""
+    from vrecho.capture import simulate_capture
+    from vrecho.render import Camera
+
+    from conftest import small_room
+
+    scene = small_room()
+    folder = tmp_path_factory.mktemp("posed")
+    return scene, simulate_capture(scene, folder, n_pulses=16, fps=3, camera=Camera(200, 150), seed=3)
+
+
+def test_a_posed_capture_repairs_the_users_mesh_and_exports(posed, tmp_path):
+    import csv
+    import json
+
+    from vrecho.cli import main
+    from vrecho.scan_metrics import phantom_area_m2
+
+    from pxr import Usd
+
+    scene, sim = posed
+    out = tmp_path / "out"
+    assert main(["capture", str(sim["video"]), "--poses", str(sim["poses"]), "--mesh", str(sim["mesh"]),
+                 "--image-fps", "3", "--out", str(out), "--quiet"]) == 0
+    rows = list(csv.DictReader(open(out / "frames.csv")))
+    assert len(rows) == 16
+    errors = []
+    for r, t, pose in zip(rows, sim["onsets_s"], sim["pulse_poses"]):  # each pulse found, and posed where it was
+        assert abs(float(r["time_s"]) - t) < 1 / 44100
+        errors.append(np.linalg.norm([float(r[k]) for k in ("x_m", "y_m", "z_m")] - pose[:3, 3]))
+    # interpolated between pictures a third of a second apart (a phone's tracking gives 30 a second)
+    assert np.median(errors) < 0.005 and max(errors) < 0.05, errors
+    report = json.loads((out / "report.json").read_text())
+    heard = [h for h in report["holes"] if h["decision"]["state"] != "unknown"]
+    assert sorted((h["decision"]["state"], h["decision"]["material"]) for h in heard) == \
+        [("closed", "glass"), ("closed", "mirror"), ("open", None)]
+    assert {int(r["hole"]) for r in rows if r["hole"]} >= {h["id"] for h in heard}
+    glass = next(h for h in heard if h["decision"]["material"] == "glass")
+    assert abs(glass["decision"]["offset_m"] - 0.0) < 0.03  # wall 0 is the plane y = 0
+    import open3d as o3d
+
+    before = phantom_area_m2(scene, o3d.io.read_triangle_mesh(str(sim["mesh"])))
+    after = phantom_area_m2(scene, o3d.io.read_triangle_mesh(str(out / "repaired.ply")))
+    assert before > 1.0 and after < 0.1 * before, (before, after)
+    assert main(["export", str(out), "--out", str(tmp_path / "room.usda"), "--quiet"]) == 0
+    stage = Usd.Stage.Open(str(tmp_path / "room.usda"))
+    states = {p.GetName(): p.GetAttribute("vrecho:state").Get() for p in stage.Traverse()
+              if p.HasAttribute("vrecho:state")}
+    assert sorted(v for v in states.values() if v != "unknown") == ["closed", "closed", "open"]
+
+
+def test_poses_that_do_not_fit_the_capture_are_one_clear_error(posed, tmp_path):
+    import shutil
+
+    import open3d as o3d
+
+    from vrecho.capture import run
+
+    _, sim = posed
+    far = tmp_path / "far.ply"  # the mesh of somewhere else
+    o3d.io.write_triangle_mesh(str(far), o3d.io.read_triangle_mesh(str(sim["mesh"])).translate([50.0, 0, 0]))
+    upside = tmp_path / "upside"  # a model neither levelled nor z up
+    shutil.copytree(sim["poses"], upside)
+    lines = (upside / "images.txt").read_text().splitlines()
+    for k, line in enumerate(lines):
+        t = line.split()
+        if len(t) == 10 and not line.startswith("#"):
+            q = np.array(t[1:5], float)  # the world turned upside down about x: q' = q * (0, 1, 0, 0)
+            w, x, y, z = q
+            t[1:5] = map(str, [-x, w, z, -y])
+            lines[k] = " ".join(t)
+    (upside / "images.txt").write_text("\n".join(lines) + "\n")
+    cases = [(dict(poses=sim["poses"], mesh=sim["mesh"], image_fps=0.5), "do not match the recording"),
+             (dict(poses=sim["poses"], mesh=far, image_fps=3), "meets the mesh"),
+             (dict(poses=upside, mesh=sim["mesh"], image_fps=3), "up axes"),
+             (dict(poses=sim["poses"], image_fps=3), "go together"),
+             (dict(poses=sim["poses"], mesh=sim["poses"] / "images.txt", image_fps=3), "not a .ply or .obj"),
+             (dict(poses=sim["poses"], mesh=sim["mesh"]), "image-fps")]
+    for kwargs, message in cases:
+        with pytest.raises(VrechoError, match=message):
+            run(tmp_path / "o", sim["video"], **kwargs)

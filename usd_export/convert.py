@@ -38,7 +38,8 @@ def from_reconstruction(result) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarra
             n = np.cross(polygon[1] - polygon[0], polygon[2] - polygon[0])
             if n @ hole.plane.normal < 0:  # face the room
                 polygon = polygon[::-1]
-            surfaces.append(LabeledSurface(f"opening_{k}", polygon, "open", None, depth, d.confidence))
+            name = "opening" if d.state == "open" else "hole"  # unknown: no frame listened to it
+            surfaces.append(LabeledSurface(f"{name}_{k}", polygon, d.state, None, depth, d.confidence))
     return room, surfaces
 
 

@@ -31,7 +31,7 @@ from vrecho.errors import VrechoError
 from vrecho.reconstruct import SURFACE_COLOURS
 
 SUFFIXES = (".usda", ".usdc", ".usd", ".usdz")
-STATES = ("open", "closed")
+STATES = ("open", "closed", "unknown")
 MATERIALS = ("glass", "mirror", "wall")
 TIME_CODES_PER_SECOND = 24.0
 
@@ -41,7 +41,8 @@ class LabeledSurface:
     """A discontinuity of the scan as vrecho decided it.
 
     ``polygon`` (K, 3): a planar polygon in vrecho's world frame (metres, Z up), wound
-    counter-clockwise seen from the room; ``state`` "open" or "closed"; ``material`` "glass",
+    counter-clockwise seen from the room; ``state`` "open", "closed" or "unknown" (a hole no
+    listening frame faced: left as the scan had it); ``material`` "glass",
     "mirror" or "wall" when closed (None when open); ``depth_m`` the plane's distance the echoes
     gave (None if unknown); ``confidence`` in [0, 1].
     """
@@ -261,7 +262,7 @@ def _write_stage(stage_path: Path, audio_dir: Path, vertices, faces, colours, su
         prim.CreateAttribute("vrecho:depth_m", Sdf.ValueTypeNames.Double, custom=True).Set(
             float("nan") if s.depth_m is None else float(s.depth_m))
         prim.CreateAttribute("vrecho:confidence", Sdf.ValueTypeNames.Double, custom=True).Set(float(s.confidence))
-        if s.state == "open":  # nothing is there: kept for its labels, never rendered
+        if s.state != "closed":  # nothing is there (or nothing known): kept for its labels, never rendered
             mesh.CreatePurposeAttr(UsdGeom.Tokens.guide)
         else:
             _bind(prim, looks[s.material])

@@ -23,6 +23,7 @@ door slam or lost to a dropout, the microphone clips. :func:`find_onsets` finds 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -215,21 +216,22 @@ def read_video(path) -> tuple[np.ndarray, int, np.ndarray]:
             chunks, times, a0 = [], [], None
             streams = [astream] + list(container.streams.video[:1])
             for packet in container.demux(streams):
+                if packet.stream.type == "video":  # its time is enough: pictures are decoded only when wanted
+                    if packet.pts is not None:
+                        times.append(float(packet.pts * packet.time_base))
+                    continue
                 for frame in packet.decode():
-                    if packet.stream.type == "audio":
-                        if a0 is None:
-                            a0 = float(frame.time or 0.0)
-                        raw = frame.to_ndarray()
-                        a = raw.astype(np.float32)
-                        if frame.format.is_planar:
-                            a = a.mean(axis=0)
-                        else:  # interleaved: (1, n * channels)
-                            a = a.reshape(-1, len(frame.layout.channels)).mean(axis=1)
-                        if np.issubdtype(raw.dtype, np.integer):
-                            a /= float(np.iinfo(raw.dtype).max)
-                        chunks.append(a)
-                    elif frame.time is not None:
-                        times.append(float(frame.time))
+                    if a0 is None:
+                        a0 = float(frame.time or 0.0)
+                    raw = frame.to_ndarray()
+                    a = raw.astype(np.float32)
+                    if frame.format.is_planar:
+                        a = a.mean(axis=0)
+                    else:  # interleaved: (1, n * channels)
+                        a = a.reshape(-1, len(frame.layout.channels)).mean(axis=1)
+                    if np.issubdtype(raw.dtype, np.integer):
+                        a /= float(np.iinfo(raw.dtype).max)
+                    chunks.append(a)
             fs = int(astream.rate)
     except av.FFmpegError as e:
         raise VrechoError(f"{path}: cannot decode it ({e}); expected a video FFmpeg reads (MP4/MOV/MKV with "
@@ -239,29 +241,43 @@ def read_video(path) -> tuple[np.ndarray, int, np.ndarray]:
     return np.concatenate(chunks), fs, np.array(sorted(times)) - (a0 or 0.0)
 
 
-def video_images(path, times_s) -> np.ndarray:
-    """Grayscale pictures (K, H, W) uint8 of a video at the given times (the frame shown then:
-    the last one that started), decoded in one pass."""
+def video_images(path, times_s, width: int | None = None) -> np.ndarray:
+    """Grayscale pictures (K, H, W) uint8 of a video at the given times (s from the sound's start;
+    the picture shown then: the last one that started), decoded in one pass (FFmpeg's threads),
+    scaled to ``width`` pixels across (aspect kept) if given."""
     import av
 
     times_s = np.asarray(times_s, float)
+    try:
+        return _pictures(av.open(str(path)), times_s, width)
+    except av.FFmpegError as e:
+        raise VrechoError(f"{path}: cannot decode its pictures ({e}); expected H.264 or HEVC video") from None
+
+
+def _pictures(container, times_s: np.ndarray, width: int | None) -> np.ndarray:
     out = [None] * len(times_s)
     order = np.argsort(times_s)
     k, last, t0 = 0, None, None
-    with av.open(str(path)) as container:
+    with container:
+        if not container.streams.video:
+            raise VrechoError(f"{container.name}: the file has no pictures; give a video (or --audio with --images)")
         a = container.streams.audio
+        container.streams.video[0].thread_type = "AUTO"
+        size = {}
         for frame in container.decode(video=0):
+            if width is not None and not size:
+                size = {"width": width, "height": int(round(frame.height * width / frame.width))}
             if t0 is None:
                 t0 = float(a[0].start_time * a[0].time_base) if a and a[0].start_time is not None else 0.0
             t = float(frame.time) - t0
             while k < len(order) and times_s[order[k]] < t:
-                out[order[k]] = (last if last is not None else frame).to_ndarray(format="gray")
+                out[order[k]] = (last if last is not None else frame).to_ndarray(format="gray", **size)
                 k += 1
             if k == len(order):
                 break
             last = frame  # converted only if a time falls in it
     for j in order[k:]:
-        out[j] = last.to_ndarray(format="gray")
+        out[j] = last.to_ndarray(format="gray", **size)
     return np.stack(out)
 
 
@@ -310,7 +326,7 @@ def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, 
 
     ``ir``: the room's impulse response from the loudspeaker to the microphone (sample 0: the
     emission; :func:`~vrecho.acoustics.device_impulse_response`), whose first arrival is the
-    direct sound; pulses every ``PERIOD_S * (1 + drift)`` s from ``lead_s`` plus a random
+    direct sound; or one per pulse (n_pulses, n), the device moving; pulses every ``PERIOD_S * (1 + drift)`` s from ``lead_s`` plus a random
     fraction of a sample (the two clocks are not aligned), pulses in ``dropped`` not played;
     pink noise ``snr_db`` below the direct sound, clipped at ``clip`` times the direct sound's
     peak (if given).
@@ -319,24 +335,29 @@ def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, 
     from .signals import probe
 
     s = probe(fs) if emitted is None else np.asarray(emitted, dtype=np.float64)
-    ir = np.asarray(ir, dtype=np.float64)
+    irs = np.asarray(ir, dtype=np.float64)
+    irs = np.broadcast_to(irs, (n_pulses, irs.shape[-1])) if irs.ndim == 1 else irs
+    if irs.shape[0] != n_pulses:
+        raise VrechoError(f"ir: expected one response, or one per pulse ({n_pulses}), got shape {np.shape(ir)}")
     period = PERIOD_S * (1 + drift) * fs
-    n = int(lead_s * fs + (n_pulses + 0.5) * period) + ir.size
+    n = int(lead_s * fs + (n_pulses + 0.5) * period) + irs.shape[1]
     starts = lead_s * fs + rng.uniform(0, 1) + np.arange(n_pulses) * period
-    emission = np.zeros(n)
-    m = 1 << int(np.ceil(np.log2(s.size + 64)))
+    x = np.zeros(n)
+    m = 1 << int(np.ceil(np.log2(s.size + irs.shape[1] + 64)))
     spectrum = np.fft.rfft(s, m)
     freqs = np.fft.rfftfreq(m)
+    shared = np.fft.rfft(irs[0], m) if np.ndim(ir) == 1 else None
     for k, t in enumerate(starts):
         if k in dropped:
             continue
-        i = int(np.floor(t))
-        pulse = np.fft.irfft(spectrum * np.exp(-2j * np.pi * freqs * (t - i)), m)  # a fractional delay
-        emission[i:i + m] += pulse[:n - i]
-    x = np.fft.irfft(np.fft.rfft(emission, 2 * n) * np.fft.rfft(ir, 2 * n), 2 * n)[:n]
-    direct = int(np.argmax(np.abs(ir) > 0.5 * np.abs(ir).max()))  # the first strong arrival
-    offset = float(parabolic_peaks(np.abs(ir), np.array([direct]))[0])  # its sub-sample time
-    amp = float(np.abs(ir).max())
+        i = int(np.floor(t))  # the pulse delayed by its fraction of a sample, through its response
+        heard = np.fft.irfft(spectrum * np.exp(-2j * np.pi * freqs * (t - i))
+                             * (shared if shared is not None else np.fft.rfft(irs[k], m)), m)
+        x[i:i + m] += heard[:n - i]
+    a = np.abs(irs)
+    direct = np.argmax(a > 0.5 * a.max(axis=1, keepdims=True), axis=1)  # each response's first strong arrival
+    offset = np.array([parabolic_peaks(r, np.array([d]))[0] for r, d in zip(a, direct)])  # its sub-sample time
+    amp = float(a.max())
     x = _microphone(x, s, amp, rng, snr_db, 80.0, 0.0).astype(np.float64)
     if clip is not None:
         rail = clip * amp * np.abs(s).max()
@@ -346,50 +367,286 @@ def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, 
     return x.astype(np.float32), truth
 
 
-def run(out, video=None, audio=None, classifier=None) -> list[dict]:
-    """``vrecho capture``: find the pulses of a capture (a video, or a sound file), cut its frames,
-    ask EchoCNN about each (the probe known: EchoCNN-E), and write ``frames.csv`` (one row per
-    frame: its time in the recording, the answers and their probabilities), ``images.npz`` (the
-    video's picture at each frame's time) and ``capture.png`` (the recording with the pulses
-    found and the answers). Returns the rows."""
-    import csv
+VIEW_WIDTH = 320
+"""Pictures and depth frames of a posed capture are worked at this width (pixels), as the
+simulator's camera: hole carving and EchoCNN's 64 x 25 crop need no more."""
+MAX_POSE_GAP_S = 1.0
+"""A pulse takes the pose of the pictures around it (interpolated) when one lies this close."""
 
+
+def read_audio(path) -> tuple[np.ndarray, int]:
+    """A sound file (WAV, FLAC, ...) mixed to mono, float32, and its rate."""
     import soundfile as sf
 
+    try:
+        x, fs = sf.read(str(path), dtype="float32", always_2d=True)
+    except (sf.LibsndfileError, RuntimeError) as e:
+        raise VrechoError(f"{path}: cannot read it as sound ({e}); expected WAV or FLAC") from None
+    return x.mean(axis=1), int(fs)
+
+
+def read_mesh(path):
+    """A user's triangle mesh (.ply or .obj) with open3d; one error if it holds no triangles."""
+    import open3d as o3d
+
+    path = Path(path)
+    if path.suffix.lower() not in (".ply", ".obj"):
+        raise VrechoError(f"mesh: {path} is not a .ply or .obj file")
+    if not path.is_file():
+        raise VrechoError(f"mesh: {path} does not exist")
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    if not len(mesh.triangles):
+        raise VrechoError(f"mesh: {path} holds no triangles (expected a triangle mesh, .ply or .obj)")
+    return mesh
+
+
+def interpolate_poses(times, key_times, key_poses, max_gap_s: float = MAX_POSE_GAP_S) -> tuple[np.ndarray, np.ndarray]:
+    """Camera-to-world poses (K, 4, 4) at ``times`` (s) from posed pictures at ``key_times``:
+    positions linear and rotations spherical between the two pictures around each time, or the
+    nearest picture's beyond either end. ``ok`` (K,) says which times have a picture within
+    ``max_gap_s``; the others get the nearest pose, not to be used."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    times = np.asarray(times, float)
+    order = np.argsort(key_times)
+    kt, kp = np.asarray(key_times, float)[order], np.asarray(key_poses, float)[order]
+    kt, first = np.unique(kt, return_index=True)  # one pose per time
+    kp = kp[first]
+    ok = np.min(np.abs(times[:, None] - kt[None]), axis=1) <= max_gap_s if len(times) else np.zeros(0, bool)
+    tc = np.clip(times, kt[0], kt[-1])
+    out = np.tile(np.eye(4), (len(times), 1, 1))
+    if len(kt) == 1:
+        out[:] = kp[0]
+        return out, ok
+    out[:, :3, :3] = Slerp(kt, Rotation.from_matrix(kp[:, :3, :3]))(tc).as_matrix()
+    for axis in range(3):
+        out[:, axis, 3] = np.interp(tc, kt, kp[:, axis, 3])
+    return out, ok
+
+
+def _view_intrinsics(camera, width: int = VIEW_WIDTH) -> tuple[np.ndarray, int, int]:
+    """A COLMAP camera's pinhole matrix scaled to ``width`` pixels across (pixel centres at
+    integers), and the scaled size."""
+    s = width / camera.width
+    K = camera.intrinsics.copy()
+    K[:2, :2] *= s
+    K[:2, 2] = s * (K[:2, 2] + 0.5) - 0.5
+    return K, width, int(round(camera.height * s))
+
+
+def _image_files(folder: Path, names: list[str] | None) -> list[Path]:
+    if not folder.is_dir():
+        raise VrechoError(f"images: {folder} is not a folder of pictures")
+    if names is None:
+        files = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
+        if not files:
+            raise VrechoError(f"images: {folder} holds no .png or .jpg pictures")
+        return files
+    files = [folder / n for n in names]
+    absent = [f.name for f in files if not f.is_file()]
+    if absent:
+        raise VrechoError(f"images: {len(absent)} of the pictures images.txt names are not in {folder} "
+                          f"(first: {absent[0]})")
+    return files
+
+
+def _load_pictures(files: list[Path], width: int | None) -> np.ndarray:
+    from PIL import Image
+
+    out = []
+    for f in files:
+        im = Image.open(f).convert("L")
+        if width is not None:
+            im = im.resize((width, int(round(im.height * width / im.width))), Image.BILINEAR)
+        out.append(np.asarray(im, np.uint8))
+    return np.stack(out)
+
+
+@dataclass
+class Poses:
+    """A capture's posed pictures (from COLMAP's text model, :mod:`vrecho.colmap`): the camera's
+    ``intrinsics`` at the working size (``width`` x ``height``), each picture's ``name``,
+    ``time_s`` on the recording's clock and camera-to-world ``pose``."""
+
+    intrinsics: np.ndarray
+    width: int
+    height: int
+    names: list[str]
+    time_s: np.ndarray
+    pose: np.ndarray
+
+
+def read_poses(folder, image_fps: float, duration_s: float, video_start_s: float = 0.0) -> Poses:
+    """COLMAP's text model in ``folder`` for a capture of ``duration_s`` seconds, its pictures
+    numbered from 1 at ``image_fps`` (:func:`vrecho.colmap.image_times`) from the video's first
+    picture, ``video_start_s`` after the sound's start. Checked: one camera, pictures within the
+    recording, the cameras upright in a z-up world."""
+    from . import colmap
+
+    cameras, images = colmap.read_model(folder)
+    used = {im.camera_id for im in images}
+    if len({(cameras[c].model, cameras[c].width, cameras[c].height, tuple(cameras[c].params)) for c in used}) > 1:
+        raise VrechoError(f"poses: the images use {len(used)} different cameras; expected the one camera of a video "
+                          "(COLMAP: --ImageReader.single_camera 1)")
+    K, w, h = _view_intrinsics(cameras[images[0].camera_id])
+    names = [im.name for im in images]
+    times = colmap.image_times(names, image_fps) + video_start_s
+    if times.max() > duration_s + 1.0 or times.min() < -1.0:
+        raise VrechoError(f"poses do not match the recording: images.txt's pictures lie at {times.min():.1f} to "
+                          f"{times.max():.1f} s (numbered at --image-fps {image_fps:g}), the recording lasts "
+                          f"{duration_s:.1f} s; expected the poses of this video's pictures and their extraction rate")
+    pose = np.stack([im.pose for im in images])
+    up = -pose[:, :3, 1]  # OpenCV's y points down
+    if np.median(up[:, 2]) < np.cos(np.radians(45)):
+        raise VrechoError(f"poses: the cameras' up axes point {np.round(np.median(up, axis=0), 2).tolist()}, not up "
+                          "the world's z; expected a metric, z-up model (a phone's tracked poses, or "
+                          "`colmap model_aligner`)")
+    order = np.argsort(times, kind="stable")
+    return Poses(K, w, h, [names[k] for k in order], times[order], pose[order])
+
+
+def posed_scan(mesh, poses: Poses, pictures: np.ndarray, frames: np.ndarray, frame_times: np.ndarray,
+               frame_pictures: np.ndarray, emitted: np.ndarray, min_hit: float = 0.3):
+    """A :class:`~vrecho.reconstruct.Scan` of a user's mesh and capture: one view per posed
+    picture and one per pulse frame (the pose interpolated at its emission), each with the depth
+    the mesh gives along its rays (:func:`~vrecho.render.mesh_depth`) and its picture (uint8 at
+    the working size), and the pulses' frames as its echoes. Pulses with no posed picture within
+    :data:`MAX_POSE_GAP_S` are left out; returns the scan and which frames it holds."""
+    from .reconstruct import Echoes, Scan
+    from .render import View, mesh_depth
+
+    pulse_pose, ok = interpolate_poses(frame_times, poses.time_s, poses.pose)
+    if not ok.any():
+        raise VrechoError(f"poses do not match the recording: no pulse ({len(frame_times)} from "
+                          f"{frame_times.min():.1f} to {frame_times.max():.1f} s) lies within {MAX_POSE_GAP_S:g} s of "
+                          f"a posed picture ({poses.time_s.min():.1f} to {poses.time_s.max():.1f} s)")
+    all_pose = np.concatenate([poses.pose, pulse_pose[ok]])
+    depth = mesh_depth(mesh, all_pose, poses.intrinsics, poses.width, poses.height)
+    hit = float(np.mean(depth[len(poses.pose):] > 0))
+    if hit < min_hit:
+        raise VrechoError(f"mesh: only {hit:.0%} of what the camera sees at the pulses meets the mesh; expected the "
+                          "surfaces in view (the mesh and images.txt in one world frame, metric, z up)")
+    gray = np.concatenate([pictures, frame_pictures[ok]]).astype(np.float32) / 255
+    if gray.shape[1:] != depth.shape[1:]:
+        raise VrechoError(f"images: pictures of {gray.shape[2]} x {gray.shape[1]} pixels at the working width, the "
+                          f"camera's are {poses.width} x {poses.height}: cameras.txt is not this video's camera")
+    views = [View(g, d, poses.intrinsics, p) for g, d, p in zip(gray, depth, all_pose)]
+    n = len(poses.pose)
+    echoes = Echoes(np.arange(n, n + int(ok.sum())), frames[ok], FS, np.asarray(emitted, float))
+    return Scan(views, mesh, echoes), ok
+
+
+def _answers(clf, frames, emitted, images=None) -> list[dict]:
+    preds = clf.predict_batch(frames, FS, images, emitted) if len(frames) else []
+    return [{"model": p.model, "open": p.is_open, "material": "-" if p.is_open else p.material,
+             "depth_m": round(float(p.depth_m), 4), "p_open": round(p.probabilities["open"], 4),
+             "p_mirror": round(p.probabilities["mirror"], 4), "confidence": round(p.confidence, 4),
+             "flags": " ".join(p.flags)} for p in preds]
+
+
+def run(out, video=None, audio=None, images=None, poses=None, mesh=None, image_fps: float | None = None,
+        labels: str = "echocnn", classifier=None, progress: bool = False) -> dict:
+    """``vrecho capture``: a phone's capture in, EchoCNN's answers (and a repaired scan) out.
+
+    The pulses of the recording (a video's sound, or ``audio``) are found and cut into frames,
+    and EchoCNN answers each, the probe known (EchoCNN-E). Written to ``out``: ``frames.csv``
+    (one row per frame: its time in the recording, the answers and their probabilities),
+    ``capture.png`` (the recording, the pulses found and the answers) and ``images.npz`` (the
+    picture at each frame's time, from the video or the numbered pictures in ``images``).
+
+    With ``poses`` (COLMAP's text model of the pictures, numbered at ``image_fps``) and the
+    user's ``mesh`` (.ply or .obj, in the poses' world): each frame takes the pose of its
+    pulse, the frames that face a hole of the mesh are asked again with the camera's crop
+    around it (EchoCNN-EV, PROTOCOL.md's 64 x 25), and the reconstruction's repair runs on
+    the mesh (``labels`` as :func:`vrecho.reconstruct.reconstruct`): ``initial.ply``,
+    ``repaired.ply``, ``report.json``, ``before_after.png`` and ``scan/`` (which ``vrecho
+    export`` turns into USD). Returns ``{"rows": [...], "result": Reconstruction or None}``.
+    """
+    import csv
+
     from .classifier import load_classifier
+    from .colmap import image_times
     from .io import ensure_writable_dir
+    from .reconstruct import LABELS, facing, reconstruct, write
+    from .render import crop_view
     from .signals import probe
 
     if (video is None) == (audio is None):
         raise VrechoError("capture: give a video, or --audio with a sound file (not both)")
+    if images is not None and video is not None:
+        raise VrechoError("capture: --images goes with --audio (a video's pictures are its own)")
+    if (poses is None) != (mesh is None):
+        raise VrechoError("capture: --poses and --mesh go together (COLMAP's poses of the pictures, and the mesh)")
+    if (poses is not None or images is not None) and image_fps is None:
+        raise VrechoError("capture: --poses and --images need --image-fps, the rate the pictures were extracted at")
+    if poses is not None and video is None and images is None:
+        raise VrechoError("capture: --poses needs the pictures: a video, or --audio with --images")
+    if labels not in LABELS[:2]:
+        raise VrechoError(f"labels: expected one of {LABELS[:2]}, got {labels!r}")
     if audio is not None:
-        try:
-            x, fs = sf.read(str(audio), dtype="float32", always_2d=True)
-        except (sf.LibsndfileError, RuntimeError) as e:
-            raise VrechoError(f"{audio}: cannot read it as sound ({e}); expected WAV or FLAC") from None
-        x = x.mean(axis=1)
+        x, fs = read_audio(audio)
+        video_start = 0.0
     else:
-        x, fs, _ = read_video(video)
+        x, fs, vtimes = read_video(video)
+        video_start = float(vtimes[0]) if len(vtimes) else 0.0
+    posed = None
+    if poses is not None:
+        posed = read_poses(poses, image_fps, x.size / fs, video_start)
+        user_mesh = read_mesh(mesh)
+    files = _image_files(Path(images), None if posed is None else posed.names) if images is not None else None
     out = ensure_writable_dir(out)
     onsets = find_onsets(x, fs)
     frames = cut_frames(x, onsets)
     if not len(frames):
         raise VrechoError("capture: no pulse has a whole second of recording after it")
-    clf = load_classifier() if classifier is None else classifier
-    preds = clf.predict_batch(frames, FS, None, probe(FS))
     times = onsets.seconds[:len(frames)]
-    rows = [{"frame": k, "time_s": round(float(t), 6), "open": p.is_open, "material": "-" if p.is_open else p.material,
-             "depth_m": round(float(p.depth_m), 4), "p_open": round(p.probabilities["open"], 4),
-             "p_mirror": round(p.probabilities["mirror"], 4), "confidence": round(p.confidence, 4),
-             "flags": " ".join(p.flags)} for k, (t, p) in enumerate(zip(times, preds))]
+    width = VIEW_WIDTH if posed is not None else None
+    if video is not None:
+        shots = video_images(video, np.r_[times, posed.time_s if posed is not None else []], width)
+        frame_pictures, pictures = shots[:len(times)], shots[len(times):]
+    elif files is not None:
+        file_times = posed.time_s if posed is not None else image_times([f.name for f in files], image_fps)
+        pictures = _load_pictures(files, width)
+        frame_pictures = pictures[np.argmin(np.abs(times[:, None] - file_times[None]), axis=1)]
+    else:
+        pictures = frame_pictures = None
+    clf = load_classifier() if classifier is None else classifier
+    emitted = probe(FS)
+    rows = [{"frame": k, "time_s": round(float(t), 6)} | a
+            for k, (t, a) in enumerate(zip(times, _answers(clf, frames, emitted)))]
+    result = None
+    if posed is not None:
+        scan, ok = posed_scan(user_mesh, posed, pictures, frames, times, frame_pictures, emitted)
+        result = reconstruct(scan, None, labels, progress=progress, classifier=clf)
+        heard = [k for k, h in enumerate(result.holes) if any(r["frame"] >= len(posed.pose)
+                                                              for r in result.decisions[k].frames)]
+        if result.holes and not heard:
+            raise VrechoError(f"capture: the mesh has {len(result.holes)} hole(s) and no pulse was played facing one "
+                              "(within 25 degrees of its normal, 0.25 to 3.5 m away); film each glass, mirror or "
+                              "opening from in front while the pulses play")
+        views, first = scan.views, len(posed.pose)
+        frame_of = dict(zip(range(first, len(views)), np.flatnonzero(ok)))
+        for k, v in zip(np.flatnonzero(ok), views[first:]):
+            rows[k].update(x_m=round(float(v.pose[0, 3]), 4), y_m=round(float(v.pose[1, 3]), 4),
+                           z_m=round(float(v.pose[2, 3]), 4))
+        for h, hole in enumerate(result.holes):  # frames facing a hole: asked again with the crop around it
+            for i in facing(views, hole):
+                if i in frame_of and "hole" not in rows[frame_of[i]]:
+                    crop, inside = crop_view(views[i], hole.corners())
+                    a = _answers(clf, frames[frame_of[i]][None], emitted, crop[None] if inside >= 0.98 else None)[0]
+                    rows[frame_of[i]].update(a, hole=h)
+        write(result, out, save_scan=True)
+    fields = ["frame", "time_s", "x_m", "y_m", "z_m", "hole", "model", "open", "material", "depth_m", "p_open",
+              "p_mirror", "confidence", "flags"]
     with open(out / "frames.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, list(rows[0]))
+        w = csv.DictWriter(f, fields if posed is not None else [c for c in fields if c not in ("x_m", "y_m", "z_m", "hole")],
+                           restval="")
         w.writeheader()
         w.writerows(rows)
-    if video is not None:
-        np.savez_compressed(out / "images.npz", time_s=times, gray=video_images(video, times))
+    if frame_pictures is not None:
+        np.savez_compressed(out / "images.npz", time_s=times, gray=frame_pictures)
     _figure(x, fs, onsets, rows, out / "capture.png")
-    return rows
+    return {"rows": rows, "result": result}
 
 
 def _figure(x, fs, onsets: Onsets, rows: list[dict], path) -> None:
@@ -420,3 +677,55 @@ def _figure(x, fs, onsets: Onsets, rows: list[dict], path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def simulate_capture(scene, folder, n_pulses: int = 20, fps: float = 4.0, camera=None, seed: int = 0,
+                     audio_codec: str = "flac", snr_db: float = 30.0, progress: bool = False) -> dict:
+    """A phone capture of a scene as a user brings it to ``vrecho capture``, made by the simulator:
+    the device walks the scene's path (:func:`~vrecho.scene.walkthrough_path` if it has none)
+    for ``n_pulses`` seconds playing the pulse train; ``capture.mkv`` (H.264 pictures at ``fps``
+    and the microphone's sound; ``audio_codec`` "flac", or "aac" in ``capture.mp4``), the
+    pictures' poses as COLMAP's text model in ``poses/`` (numbered from 1 at ``fps``, as ffmpeg
+    extracts them), and the depth camera's scan fused into ``mesh.ply``. Each pulse is heard
+    through the room's response where the device is when it plays. Returns the paths, and the
+    true onsets (s) and device poses of the pulses."""
+    import dataclasses
+
+    import open3d as o3d
+    from tqdm import tqdm
+
+    from . import colmap
+    from .acoustics import device_impulse_response
+    from .io import ensure_writable_dir
+    from .reconstruct import device_pose, fuse
+    from .render import Camera, View, World, camera_pose, render_view
+    from .scene import walkthrough_path
+
+    camera = Camera() if camera is None else camera
+    if scene.camera_path is None:
+        scene = dataclasses.replace(scene, camera_path=walkthrough_path(scene))
+    folder = ensure_writable_dir(folder)
+    rng = np.random.default_rng(seed)
+    lead_s = 0.3
+    walk = lambda t: np.clip((np.asarray(t, float) - lead_s) / max(n_pulses - 1, 1), 0, 1)  # noqa: E731 (pulse k at k/(n-1))
+    pulse_t = lead_s + np.arange(n_pulses) * PERIOD_S
+    pos, fwd = scene.camera_path.at(walk(pulse_t))
+    poses = [camera_pose(p, f) for p, f in zip(pos, fwd)]
+    irs = np.stack([device_impulse_response(scene, device_pose(View(None, None, None, q)))[0]
+                    for q in tqdm(poses, desc="simulate pulses", unit="pulse", disable=not progress)])
+    x, onsets = simulate_recording(irs, n_pulses, rng, snr_db=snr_db, lead_s=lead_s)
+    x = 0.5 * x / np.abs(x).max()
+    duration = len(x) / FS
+    pic_t = np.arange(int(duration * fps)) / fps
+    pos, fwd = scene.camera_path.at(walk(pic_t))
+    world = World(scene)
+    views = [render_view(world, camera_pose(p, f), camera)
+             for p, f in tqdm(list(zip(pos, fwd)), desc="render pictures", unit="picture", disable=not progress)]
+    video = folder / ("capture.mkv" if audio_codec == "flac" else "capture.mp4")
+    write_video(video, np.stack([np.round(255 * v.gray).astype(np.uint8) for v in views]), fps, x, FS, audio_codec)
+    names = [f"{k + 1:06d}.png" for k in range(len(views))]
+    colmap.write_model(folder / "poses", colmap.pinhole(camera.intrinsics, camera.width, camera.height), names,
+                       np.stack([v.pose for v in views]))
+    o3d.io.write_triangle_mesh(str(folder / "mesh.ply"), fuse(views, progress=progress))
+    return {"video": video, "poses": folder / "poses", "mesh": folder / "mesh.ply", "fps": fps,
+            "onsets_s": onsets / FS, "pulse_poses": np.stack(poses)}

@@ -112,11 +112,22 @@ def _heard(scene, seed: int, progress: bool) -> list:
 def _capture(args) -> int:
     from .capture import run
 
-    rows = run(args.out, args.video, args.audio)
+    done = run(args.out, args.video, args.audio, args.images, args.poses, args.mesh, args.image_fps, args.labels,
+               progress=not args.quiet)
+    rows, result = done["rows"], done["result"]
     n_open = sum(r["open"] for r in rows)
     print(f"{len(rows)} frames: {n_open} open, {len(rows) - n_open} closed "
           f"({sum(r['material'] == 'mirror' for r in rows)} mirror)")
-    print(f"written to {args.out}: frames.csv, capture.png" + (", images.npz" if args.video else ""))
+    files = "frames.csv, capture.png" + (", images.npz" if args.video or args.images else "")
+    if result is not None:
+        from .reconstruct import summary
+
+        posed = sum("x_m" in r for r in rows)
+        print(f"{posed} frames posed; {len(result.holes)} holes in the mesh, {len(result.surfaces)} surfaces added")
+        if result.holes:
+            print(summary(result))
+        files += ", initial.ply, repaired.ply, report.json, before_after.png, scan/ (vrecho export takes it)"
+    print(f"written to {args.out}: {files}")
     return 0
 
 
@@ -206,13 +217,27 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--quiet", action="store_true", help="no progress bars")
     x.set_defaults(func=_export)
 
-    c = sub.add_parser("capture", help="a phone's capture (video, or sound file): pulses, frames, EchoCNN's answers",
+    c = sub.add_parser("capture", help="a phone's capture (video, or sound file): pulses, frames, EchoCNN's answers, "
+                                       "and the repair of its mesh",
                        description="Decode a capture (PyAV), find vrecho's pulses in its sound, cut PROTOCOL.md's "
                                    "1 s frames and ask EchoCNN about each; writes frames.csv, capture.png and the "
-                                   "video's picture at each frame (images.npz).")
+                                   "picture at each frame (images.npz). With --poses and --mesh, also repairs the "
+                                   "mesh (initial.ply, repaired.ply, report.json, before_after.png, scan/ for "
+                                   "`vrecho export`).")
     c.add_argument("video", type=Path, nargs="?", default=None, help="the video (MP4, MOV, MKV) with its sound")
     c.add_argument("--audio", type=Path, default=None, help="a sound file (WAV, FLAC) instead of a video")
+    c.add_argument("--images", type=Path, default=None,
+                   help="with --audio: a folder of the capture's pictures, numbered in order (ffmpeg's %%06d.png)")
+    c.add_argument("--image-fps", type=float, default=None,
+                   help="the rate the pictures were extracted at, numbered from 1 (ffmpeg -vf fps=N); "
+                        "needed by --images and --poses")
+    c.add_argument("--poses", type=Path, default=None,
+                   help="a folder with COLMAP's text model of the pictures (cameras.txt, images.txt): metric, z up")
+    c.add_argument("--mesh", type=Path, default=None, help="with --poses: the scan's mesh (.ply or .obj) to repair")
+    c.add_argument("--labels", choices=("echocnn", "echocnn-only"), default="echocnn",
+                   help="who decides what each hole is (as for reconstruct; default: echocnn)")
     c.add_argument("--out", type=Path, required=True, help="output folder")
+    c.add_argument("--quiet", action="store_true", help="no progress bars")
     c.set_defaults(func=_capture)
 
     d = sub.add_parser("demo", help="run vrecho on its built-in living room",

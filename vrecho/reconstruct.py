@@ -1001,14 +1001,16 @@ def _below(mesh, z_max: float):
 
 def resolve_source(source: str | Path) -> Scene | Path:
     """What the command line names, checked before any work: ``builtin`` (the living room) or a
-    scene JSON file gives its :class:`Scene`; a folder is a user's scan (:func:`load_scan`)."""
+    scene JSON file gives its :class:`Scene`; a folder is a user's scan (:func:`load_scan`), or
+    a folder with one in ``scan/`` (what ``vrecho capture --poses`` writes)."""
     from .scene import builtin_scene, load_scene
 
     source = Path(source)
     if str(source) == "builtin":
         return builtin_scene()
-    if source.is_dir():
-        return source
+    if source.is_dir():  # a scan folder, or the output of `vrecho capture` or `reconstruct --save-scan` holding one
+        return source / "scan" if not (source / "frames.npz").exists() and (source / "scan" / "frames.npz").exists() \
+            else source
     if source.is_file():
         return load_scene(source)
     raise VrechoError(f"scene: {source} is neither 'builtin', a scene JSON file nor a scan folder")
@@ -1036,11 +1038,7 @@ def run(source: str | Path, out: str | Path, labels: str = "echocnn", variant: s
     the metrics against its truth, :func:`vrecho.scan_metrics.score`) and ``before_after.png``;
     with ``save_scan`` the scan itself (``scan/``, the folder format of :func:`load_scan`).
     """
-    import json
-
-    import open3d as o3d
-
-    from .io import atomic_write_text, ensure_writable_dir
+    from .io import ensure_writable_dir
 
     if labels not in LABELS:
         raise VrechoError(f"labels: expected one of {LABELS}, got {labels!r}")
@@ -1050,6 +1048,20 @@ def run(source: str | Path, out: str | Path, labels: str = "echocnn", variant: s
     out = ensure_writable_dir(out)
     scan, scene = open_source(resolved, n_frames, progress)
     result = reconstruct(scan, scene, labels, variant, seed=seed, progress=progress)
+    write(result, out, scene, save_scan)
+    return result
+
+
+def write(result: Reconstruction, out: Path, scene: Scene | None = None, save_scan: bool = False) -> None:
+    """A run's files in ``out``: ``initial.ply``, ``repaired.ply``, ``report.json`` (with the
+    metrics against a scene's truth), ``before_after.png`` and, with ``save_scan``, ``scan/``."""
+    import json
+
+    import open3d as o3d
+
+    from .io import atomic_write_text
+
+    scan = result.scan
     o3d.io.write_triangle_mesh(str(out / "initial.ply"), scan.mesh)
     o3d.io.write_triangle_mesh(str(out / "repaired.ply"), result.repaired)
     report = result.report()
@@ -1061,7 +1073,6 @@ def run(source: str | Path, out: str | Path, labels: str = "echocnn", variant: s
     before_after(result, out / "before_after.png")
     if save_scan:
         scan.save(out / "scan")
-    return result
 
 
 def summary(result: Reconstruction) -> str:

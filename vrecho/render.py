@@ -361,3 +361,21 @@ def render_mesh(mesh, pose: np.ndarray, camera: Camera = Camera()) -> np.ndarray
     light = 0.35 + 0.65 * np.abs(np.sum(normals[hit] * dirs[hit], axis=-1))
     img[hit] = colours[tris[p]].mean(axis=1) * light[:, None]
     return np.clip(img, 0, 1)
+
+
+def mesh_depth(mesh, poses: np.ndarray, intrinsics: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Depth frames (N, H, W) float32 of an open3d triangle mesh seen from camera-to-world
+    ``poses`` (N, 4, 4) through a pinhole ``intrinsics``: z-depth in metres, 0 where a ray meets
+    nothing within :data:`DEPTH_MAX_M`. What a depth sensor reads off a user's mesh: where the
+    mesh has a hole the ray goes on to whatever lies beyond it, as the sensor's did."""
+    import open3d as o3d
+
+    rc = o3d.t.geometry.RaycastingScene()
+    rc.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
+    K = o3d.core.Tensor(np.asarray(intrinsics, float))
+    out = np.zeros((len(poses), height, width), np.float32)
+    for k, pose in enumerate(np.asarray(poses, float)):
+        rays = rc.create_rays_pinhole(K, o3d.core.Tensor(np.linalg.inv(pose)), width, height)
+        z = rc.cast_rays(rays)["t_hit"].numpy()  # the rays' directions have z = 1 in the camera: t is z-depth
+        out[k] = np.where(np.isfinite(z) & (z <= DEPTH_MAX_M), z, 0.0)
+    return out

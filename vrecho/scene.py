@@ -428,10 +428,14 @@ class CameraPath:
 
     def sample(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """``n`` positions (n, 3) and unit forward axes (n, 3), evenly spaced in time."""
+        return self.at(np.linspace(0.0, 1.0, n))
+
+    def at(self, t) -> tuple[np.ndarray, np.ndarray]:
+        """Positions (n, 3) and unit forward axes (n, 3) at fractions ``t`` (n,) of the walk."""
         from scipy.interpolate import CubicSpline
 
         k = np.linspace(0.0, 1.0, len(self.positions))
-        t = np.linspace(0.0, 1.0, n)
+        t = np.clip(np.asarray(t, float), 0.0, 1.0)
         bc = "natural" if len(k) > 2 else "not-a-knot"
         pos = CubicSpline(k, self.positions, bc_type=bc)(t)
         tgt = CubicSpline(k, self.look_at, bc_type=bc)(t)
