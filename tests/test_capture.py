@@ -57,6 +57,39 @@ def test_frames_start_at_the_emission_like_the_simulators(ir):
         assert np.corrcoef(f, expected)[0, 1] > 0.999
 
 
+def test_a_paused_player_and_a_clap_lose_no_pulse(ir):
+    """The player paused (or looping its file with a gap at the seam) restarts the train off the
+    beat: nothing is missing there; a clap louder than the pulses is not one."""
+    from vrecho.acoustics import MIC_SENSITIVITY
+    from vrecho.capture import find_onsets, simulate_recording
+    from vrecho.signals import emitted_sound
+
+    rng = np.random.default_rng(11)
+    x, truth = simulate_recording(ir, 12, rng, snr_db=20, pauses={4: 0.43, 8: 2.6}, dropped=(10,))
+    clap = emitted_sound("clap", 44100, rng)
+    at = int(truth[2] + 0.45 * 44100)
+    x[at:at + clap.size] += 2 * MIC_SENSITIVITY * np.abs(ir).max() * clap / np.abs(clap).max()
+    onsets = find_onsets(x, 44100)
+    played = truth[~np.isnan(truth)]
+    assert len(onsets.samples) == len(played) and np.max(np.abs(onsets.samples - played)) < 1
+    assert len(onsets.missing) == 1 and abs(onsets.missing[0] - (truth[9] + truth[11]) / 2) < 0.005 * 44100
+
+
+def test_the_shipped_pulse_train_is_the_probe_once_a_second_and_loops():
+    import soundfile as sf
+
+    from vrecho.capture import PULSE_TRAIN_WAV, find_onsets
+    from vrecho.signals import probe, pulse_train
+
+    x, fs = sf.read(PULSE_TRAIN_WAV, dtype="float32")
+    assert fs == 44100 and x.ndim == 1 and len(x) == 30 * 44100
+    assert np.max(np.abs(x - pulse_train(probe(), 30))) <= 1 / 32767  # 16-bit of the very probe
+    seam = np.zeros(int(0.137 * fs), np.float32)  # a player looping the file with a gap
+    looped = np.concatenate([seam, x, seam, x, x]) + 1e-3 * np.random.default_rng(0).standard_normal(90 * fs + 2 * seam.size)
+    onsets = find_onsets(looped, fs)
+    assert len(onsets.samples) == 90 and len(onsets.missing) == 0
+
+
 @pytest.mark.parametrize("codec, ext", [("flac", "mkv"), ("aac", "mp4")])
 def test_a_video_round_trip_gives_the_simulated_frames_answers(ir, tmp_path, codec, ext):
     """The simulator's capture muxed into a real video (PyAV); `vrecho capture` reads it back and
@@ -171,6 +204,22 @@ def test_a_posed_capture_repairs_the_users_mesh_and_exports(posed, tmp_path):
     before = phantom_area_m2(scene, o3d.io.read_triangle_mesh(str(sim["mesh"])))
     after = phantom_area_m2(scene, o3d.io.read_triangle_mesh(str(out / "repaired.ply")))
     assert before > 1.0 and after < 0.1 * before, (before, after)
+    # The same capture as separate files (--audio WAV --images DIR): the same answers
+    import soundfile as sf
+    from PIL import Image
+
+    from vrecho.capture import read_video, video_images
+
+    x, fs, times = read_video(sim["video"])
+    sf.write(tmp_path / "capture.wav", x, fs, subtype="FLOAT")
+    (tmp_path / "pictures").mkdir()
+    for k, g in enumerate(video_images(sim["video"], (np.arange(len(times)) + 0.5) / 3)):
+        Image.fromarray(g).save(tmp_path / "pictures" / f"{k + 1:06d}.png")
+    assert main(["capture", "--audio", str(tmp_path / "capture.wav"), "--images", str(tmp_path / "pictures"),
+                 "--poses", str(sim["poses"]), "--mesh", str(sim["mesh"]), "--image-fps", "3",
+                 "--out", str(tmp_path / "files"), "--quiet"]) == 0
+    again = json.loads((tmp_path / "files" / "report.json").read_text())
+    assert [h["decision"]["state"] for h in again["holes"]] == [h["decision"]["state"] for h in report["holes"]]
     assert main(["export", str(out), "--out", str(tmp_path / "room.usda"), "--quiet"]) == 0
     stage = Usd.Stage.Open(str(tmp_path / "room.usda"))
     states = {p.GetName(): p.GetAttribute("vrecho:state").Get() for p in stage.Traverse()
@@ -208,3 +257,16 @@ def test_poses_that_do_not_fit_the_capture_are_one_clear_error(posed, tmp_path):
     for kwargs, message in cases:
         with pytest.raises(VrechoError, match=message):
             run(tmp_path / "o", sim["video"], **kwargs)
+
+
+def test_a_y_up_model_is_turned_z_up(posed, tmp_path):
+    from vrecho import colmap
+    from vrecho.capture import read_poses
+
+    _, sim = posed
+    cameras, images = colmap.read_model(sim["poses"])
+    y_up = np.eye(4)
+    y_up[:3, :3] = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]  # ARKit's world: z up becomes y up
+    colmap.write_model(tmp_path, cameras[1], [im.name for im in images], np.stack([y_up @ im.pose for im in images]))
+    a, b = read_poses(sim["poses"], 3, 20.0), read_poses(tmp_path, 3, 20.0)
+    assert np.allclose(a.pose, b.pose) and np.allclose(b.to_z_up @ y_up, np.eye(4))

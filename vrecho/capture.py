@@ -11,12 +11,15 @@ door slam or lost to a dropout, the microphone clips. :func:`find_onsets` finds 
    (about 36 dB for the 100 ms probe) above noise, and clipping keeps the peak where it was.
 2. **Candidates.** The strongest lag within each half period, at least ``min_snr_db`` above the
    envelope's median (the noise floor).
-3. **The train.** Chained from the strongest candidate outward, one period at a time, the period
-   re-estimated from the onsets so far (drift): the candidate within ``tolerance_s`` of where the
-   next pulse is due is taken; where none is, the pulse is missing (and the next is looked for
-   one more period on). A stronger echo is not taken for the direct sound: the onset is the
-   highest lag within a quarter millisecond of the first, within 20 ms before the peak, whose
-   envelope reaches half of it.
+3. **The train.** The period is measured (the median spacing of candidates 0.95 to 1.05 nominal
+   periods apart: the clocks' drift); a candidate is a pulse when another lies one to four whole
+   periods away (within ``tolerance_s`` per period): a clap or a door does not recur on the
+   period, and pulses missing on both sides of one do not lose it. Where two pulses lie a whole
+   number of periods apart, the pulses between are missing; where the gap is not whole (the
+   player paused, or looped its file), the train starts again and nothing is missing. A
+   stronger echo is not taken for the direct sound: the onset is the highest lag within a
+   quarter millisecond of the first, within 20 ms before the peak, whose envelope reaches half
+   of it.
 4. **Sub-sample time.** A parabola through the envelope's three samples at the peak.
 """
 
@@ -122,40 +125,33 @@ def find_onsets(audio, fs: int = FS, emitted=None, period_s: float = PERIOD_S, m
     if len(peaks) < 2:
         raise VrechoError(f"audio: no pulse train found ({len(peaks)} pulse(s) {min_snr_db:.0f} dB above the noise "
                           f"in {x.size / fs:.1f} s); expected vrecho's pulse every {period_s:g} s")
-    # Chain the train from the strongest pulse, both ways, one period at a time.
+    # The train: candidates with another a whole number of periods away (up to four: pulses may be
+    # missing on both sides); a clap or a door does not recur on the period.
     tol = tolerance_s * fs
-    start = int(peaks[np.argmax(env[peaks])])
-    onsets, missing = {0: start}, []
-    for direction in (1, -1):
-        k, last, gap = 0, start, 1
-        while True:
-            known = sorted(onsets.items())
-            p = period if len(known) < 2 else (known[-1][1] - known[0][1]) / (known[-1][0] - known[0][0])
-            due = last + direction * gap * p
-            if not 0 <= due < env.size:
-                break
-            near = peaks[np.abs(peaks - due) <= tol * gap]
-            if len(near):
-                k += direction * gap
-                last = int(near[np.argmax(env[near])])
-                onsets[k] = last
-                gap = 1
-            else:
-                missing.append(due)
-                gap += 1
-                if gap > 4:  # four missing in a row: resume from the nearest candidate beyond
-                    ahead = peaks[(peaks - last) * direction > (gap - 0.5) * p]
-                    if not len(ahead):
-                        break
-                    nxt = int(ahead[0] if direction > 0 else ahead[-1])
-                    k += direction * int(round(abs(nxt - last) / p))
-                    last, gap = nxt, 1
-                    onsets[k] = last
-    if len(onsets) < 2:
+    pairs = [(j, peaks[j:] - peaks[:-j]) for j in range(1, len(peaks)) if (peaks[j:] - peaks[:-j]).min() < 4.5 * period]
+    near = np.concatenate([d[(d > 0.95 * period) & (d < 1.05 * period)] for _, d in pairs])
+    period = float(np.median(near)) if len(near) else period  # the clocks' drift, measured
+    support = np.zeros(len(peaks), bool)
+    for j, d in pairs:
+        m = np.round(d / period)
+        ok = (m >= 1) & (m <= 4) & (np.abs(d - m * period) <= tol * np.maximum(m, 1))
+        support[j:] |= ok
+        support[:-j] |= ok
+    # The direct sound comes as loud every time (the loudspeaker stays beside the microphone):
+    # two noise peaks that happen to lie periods apart are far weaker than the train.
+    if support.any():
+        support &= env[peaks] >= 0.1 * np.median(env[peaks[support]])
+    idx = peaks[support]
+    if len(idx) < 2:
         raise VrechoError(f"audio: no pulse train found: pulses do not recur every {period_s:g} s "
                           f"(within {tolerance_s * 1000:.0f} ms)")
-    ks = np.array(sorted(onsets))
-    idx = np.array([onsets[k] for k in ks])
+    # Missing pulses: where a gap between two found is a whole number of periods (a gap that is
+    # not, the player paused or looped, is a new start and misses nothing).
+    missing = []
+    for a, b in zip(idx[:-1], idx[1:]):
+        k = int(round((b - a) / period))
+        if k >= 2 and abs(b - a - k * period) <= tol * k:
+            missing += [a + j * (b - a) / k for j in range(1, k)]
     # The direct sound is the first strong arrival: an echo may outdo it by a little.
     lead, lobe = int(0.02 * fs), max(int(0.00025 * fs), 3)  # a quarter millisecond: past the main lobe, before any echo
     for j, i in enumerate(idx):
@@ -163,10 +159,11 @@ def find_onsets(audio, fs: int = FS, emitted=None, period_s: float = PERIOD_S, m
         first = max(i - lead, 0) + int(np.flatnonzero(w >= 0.5 * env[i])[0])
         idx[j] = first + int(np.argmax(env[first:first + lobe]))  # that arrival's own peak
     samples = parabolic_peaks(env, idx)
-    period_fit = float(np.polyfit(ks, samples, 1)[0]) / fs
-    # Only gaps the found pulses straddle are missing pulses (not the recording's ends).
-    missing = np.array(sorted(m for m in missing if samples[0] < m < samples[-1]))
-    return Onsets(samples, 20 * np.log10(env[idx] / floor), missing, period_fit, fs)
+    gaps = np.diff(samples)
+    k = np.round(gaps / period)
+    whole = (k >= 1) & (np.abs(gaps - k * period) <= tol * np.maximum(k, 1))
+    period_fit = float(np.median(gaps[whole] / k[whole])) / fs if whole.any() else period / fs
+    return Onsets(samples, 20 * np.log10(env[idx] / floor), np.array(missing), period_fit, fs)
 
 
 def cut_frames(audio, onsets: Onsets, length_s: float = 1.0, mic_offset_m: float | None = None) -> np.ndarray:
@@ -283,16 +280,20 @@ def _pictures(container, times_s: np.ndarray, width: int | None) -> np.ndarray:
 
 def write_video(path, gray: np.ndarray, fps: float, audio: np.ndarray, fs: int, audio_codec: str = "flac",
                 audio_bit_rate: int = 256_000) -> None:
-    """Mux grayscale pictures (K, H, W) uint8 at ``fps`` and a mono sound (float in [-1, 1]) into
-    a video file with PyAV (H.264; the sound as ``audio_codec``: "flac" in MKV is lossless,
-    "aac" in MP4 is what phones write, at ``audio_bit_rate``). For simulated captures and tests."""
-    import av
+    """Mux grayscale pictures (K, H, W) uint8 (an array, or any iterable of (H, W) pictures) at
+    ``fps`` and a mono sound (float in [-1, 1]) into a video file with PyAV (H.264; the sound as
+    ``audio_codec``: "flac" in MKV is lossless, "aac" in MP4 is what phones write, at
+    ``audio_bit_rate``). For simulated captures, tests and benchmarks."""
+    import itertools
     from fractions import Fraction
 
-    gray = np.asarray(gray, np.uint8)
+    import av
+
+    pictures = iter(gray)
+    first = np.asarray(next(pictures), np.uint8)
     with av.open(str(path), "w") as container:
         v = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1000))
-        v.width, v.height, v.pix_fmt = gray.shape[2], gray.shape[1], "yuv420p"
+        v.width, v.height, v.pix_fmt = first.shape[1], first.shape[0], "yuv420p"
         a = container.add_stream(audio_codec, rate=fs, layout="mono")
         if audio_codec != "flac":
             a.bit_rate = audio_bit_rate
@@ -308,8 +309,8 @@ def write_video(path, gray: np.ndarray, fps: float, audio: np.ndarray, fs: int, 
                 container.mux(packet)
         for packet in a.encode(None):
             container.mux(packet)
-        for i, g in enumerate(gray):
-            frame = av.VideoFrame.from_ndarray(np.repeat(g[..., None], 3, axis=2), format="rgb24")
+        for i, g in enumerate(itertools.chain([first], pictures)):
+            frame = av.VideoFrame.from_ndarray(np.asarray(g, np.uint8), format="gray")
             frame.pts = i
             for packet in v.encode(frame):
                 container.mux(packet)
@@ -319,7 +320,8 @@ def write_video(path, gray: np.ndarray, fps: float, audio: np.ndarray, fs: int, 
 
 def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, fs: int = FS, emitted=None,
                        snr_db: float = 30.0, drift: float = 0.0, clip: float | None = None,
-                       dropped: tuple[int, ...] = (), lead_s: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+                       dropped: tuple[int, ...] = (), lead_s: float = 0.3,
+                       pauses: dict[int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """A recording of the pulse train as a phone makes it, with the truth: the microphone's
     signal (float32) and where each pulse's direct sound begins (fractional samples; NaN for a
     dropped pulse).
@@ -327,7 +329,9 @@ def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, 
     ``ir``: the room's impulse response from the loudspeaker to the microphone (sample 0: the
     emission; :func:`~vrecho.acoustics.device_impulse_response`), whose first arrival is the
     direct sound; or one per pulse (n_pulses, n), the device moving; pulses every ``PERIOD_S * (1 + drift)`` s from ``lead_s`` plus a random
-    fraction of a sample (the two clocks are not aligned), pulses in ``dropped`` not played;
+    fraction of a sample (the two clocks are not aligned), pulses in ``dropped`` not played,
+    the train held back by ``pauses[k]`` seconds from pulse k on (the player paused, or looping
+    its file with a gap at the seam);
     pink noise ``snr_db`` below the direct sound, clipped at ``clip`` times the direct sound's
     peak (if given).
     """
@@ -342,6 +346,9 @@ def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, 
     period = PERIOD_S * (1 + drift) * fs
     n = int(lead_s * fs + (n_pulses + 0.5) * period) + irs.shape[1]
     starts = lead_s * fs + rng.uniform(0, 1) + np.arange(n_pulses) * period
+    for k, pause in (pauses or {}).items():
+        starts[k:] += pause * fs
+    n += int(sum((pauses or {}).values()) * fs)
     x = np.zeros(n)
     m = 1 << int(np.ceil(np.log2(s.size + irs.shape[1] + 64)))
     spectrum = np.fft.rfft(s, m)
@@ -367,6 +374,10 @@ def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, 
     return x.astype(np.float32), truth
 
 
+PULSE_TRAIN_WAV = Path(__file__).parent / "assets" / "pulse_train.wav"
+"""The pulse train for the second phone to play (on repeat): 30 s of vrecho's probe once a
+second (:func:`~vrecho.signals.pulse_train` of :func:`~vrecho.signals.probe`), 44.1 kHz, 16-bit
+PCM. A player's gap at the loop's seam costs nothing: :func:`find_onsets` restarts the train."""
 VIEW_WIDTH = 320
 """Pictures and depth frames of a posed capture are worked at this width (pixels), as the
 simulator's camera: hole carving and EchoCNN's 64 x 25 crop need no more."""
@@ -466,7 +477,8 @@ def _load_pictures(files: list[Path], width: int | None) -> np.ndarray:
 class Poses:
     """A capture's posed pictures (from COLMAP's text model, :mod:`vrecho.colmap`): the camera's
     ``intrinsics`` at the working size (``width`` x ``height``), each picture's ``name``,
-    ``time_s`` on the recording's clock and camera-to-world ``pose``."""
+    ``time_s`` on the recording's clock and camera-to-world ``pose`` in a z-up world;
+    ``to_z_up`` (4, 4) turns the model's world into that one (identity, or a y-up world turned)."""
 
     intrinsics: np.ndarray
     width: int
@@ -474,13 +486,14 @@ class Poses:
     names: list[str]
     time_s: np.ndarray
     pose: np.ndarray
+    to_z_up: np.ndarray
 
 
 def read_poses(folder, image_fps: float, duration_s: float, video_start_s: float = 0.0) -> Poses:
     """COLMAP's text model in ``folder`` for a capture of ``duration_s`` seconds, its pictures
     numbered from 1 at ``image_fps`` (:func:`vrecho.colmap.image_times`) from the video's first
     picture, ``video_start_s`` after the sound's start. Checked: one camera, pictures within the
-    recording, the cameras upright in a z-up world."""
+    recording, the cameras upright in a z-up world (a y-up world is turned z up)."""
     from . import colmap
 
     cameras, images = colmap.read_model(folder)
@@ -496,13 +509,17 @@ def read_poses(folder, image_fps: float, duration_s: float, video_start_s: float
                           f"{times.max():.1f} s (numbered at --image-fps {image_fps:g}), the recording lasts "
                           f"{duration_s:.1f} s; expected the poses of this video's pictures and their extraction rate")
     pose = np.stack([im.pose for im in images])
-    up = -pose[:, :3, 1]  # OpenCV's y points down
-    if np.median(up[:, 2]) < np.cos(np.radians(45)):
-        raise VrechoError(f"poses: the cameras' up axes point {np.round(np.median(up, axis=0), 2).tolist()}, not up "
-                          "the world's z; expected a metric, z-up model (a phone's tracked poses, or "
-                          "`colmap model_aligner`)")
+    up = np.median(-pose[:, :3, 1], axis=0)  # OpenCV's y points down
+    to_z_up = np.eye(4)
+    if up[1] >= np.cos(np.radians(45)):  # a y-up world (ARKit's, OpenGL's): turned z up
+        to_z_up[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]
+        pose = to_z_up @ pose
+    elif up[2] < np.cos(np.radians(45)):
+        raise VrechoError(f"poses: the cameras' up axes point {np.round(up, 2).tolist()}, up neither the world's z nor "
+                          "its y; expected a metric model with gravity along -z or -y (a phone's tracked poses, or "
+                          "a COLMAP model scaled and levelled with `colmap model_aligner`)")
     order = np.argsort(times, kind="stable")
-    return Poses(K, w, h, [names[k] for k in order], times[order], pose[order])
+    return Poses(K, w, h, [names[k] for k in order], times[order], pose[order], to_z_up)
 
 
 def posed_scan(mesh, poses: Poses, pictures: np.ndarray, frames: np.ndarray, frame_times: np.ndarray,
@@ -545,7 +562,8 @@ def _answers(clf, frames, emitted, images=None) -> list[dict]:
 
 
 def run(out, video=None, audio=None, images=None, poses=None, mesh=None, image_fps: float | None = None,
-        labels: str = "echocnn", classifier=None, progress: bool = False) -> dict:
+        labels: str = "echocnn", emitter_distance_m: float | None = None, classifier=None,
+        progress: bool = False) -> dict:
     """``vrecho capture``: a phone's capture in, EchoCNN's answers (and a repaired scan) out.
 
     The pulses of the recording (a video's sound, or ``audio``) are found and cut into frames,
@@ -555,12 +573,16 @@ def run(out, video=None, audio=None, images=None, poses=None, mesh=None, image_f
     picture at each frame's time, from the video or the numbered pictures in ``images``).
 
     With ``poses`` (COLMAP's text model of the pictures, numbered at ``image_fps``) and the
-    user's ``mesh`` (.ply or .obj, in the poses' world): each frame takes the pose of its
+    user's ``mesh`` (.ply or .obj, in the poses' world; a y-up world is turned z up, and the
+    meshes written are in that z-up world): each frame takes the pose of its
     pulse, the frames that face a hole of the mesh are asked again with the camera's crop
     around it (EchoCNN-EV, PROTOCOL.md's 64 x 25), and the reconstruction's repair runs on
     the mesh (``labels`` as :func:`vrecho.reconstruct.reconstruct`): ``initial.ply``,
     ``repaired.ply``, ``report.json``, ``before_after.png`` and ``scan/`` (which ``vrecho
-    export`` turns into USD). Returns ``{"rows": [...], "result": Reconstruction or None}``.
+    export`` turns into USD). ``emitter_distance_m``: from the loudspeaker to the microphone
+    (default PROTOCOL.md's 7 cm; a second phone held elsewhere, measured), which places each
+    frame's start, the emission, before the direct sound's arrival. Returns ``{"rows": [...],
+    "result": Reconstruction or None}``.
     """
     import csv
 
@@ -583,6 +605,9 @@ def run(out, video=None, audio=None, images=None, poses=None, mesh=None, image_f
         raise VrechoError("capture: --poses needs the pictures: a video, or --audio with --images")
     if labels not in LABELS[:2]:
         raise VrechoError(f"labels: expected one of {LABELS[:2]}, got {labels!r}")
+    if emitter_distance_m is not None and not 0 <= emitter_distance_m <= 3:
+        raise VrechoError(f"emitter-distance: expected 0 to 3 m from the loudspeaker to the microphone, "
+                          f"got {emitter_distance_m}")
     if audio is not None:
         x, fs = read_audio(audio)
         video_start = 0.0
@@ -592,11 +617,11 @@ def run(out, video=None, audio=None, images=None, poses=None, mesh=None, image_f
     posed = None
     if poses is not None:
         posed = read_poses(poses, image_fps, x.size / fs, video_start)
-        user_mesh = read_mesh(mesh)
+        user_mesh = read_mesh(mesh).transform(posed.to_z_up)
     files = _image_files(Path(images), None if posed is None else posed.names) if images is not None else None
     out = ensure_writable_dir(out)
     onsets = find_onsets(x, fs)
-    frames = cut_frames(x, onsets)
+    frames = cut_frames(x, onsets, mic_offset_m=emitter_distance_m)
     if not len(frames):
         raise VrechoError("capture: no pulse has a whole second of recording after it")
     times = onsets.seconds[:len(frames)]
@@ -618,9 +643,7 @@ def run(out, video=None, audio=None, images=None, poses=None, mesh=None, image_f
     if posed is not None:
         scan, ok = posed_scan(user_mesh, posed, pictures, frames, times, frame_pictures, emitted)
         result = reconstruct(scan, None, labels, progress=progress, classifier=clf)
-        heard = [k for k, h in enumerate(result.holes) if any(r["frame"] >= len(posed.pose)
-                                                              for r in result.decisions[k].frames)]
-        if result.holes and not heard:
+        if result.holes and not any(d.frames for d in result.decisions):  # only pulses' views have echoes
             raise VrechoError(f"capture: the mesh has {len(result.holes)} hole(s) and no pulse was played facing one "
                               "(within 25 degrees of its normal, 0.25 to 3.5 m away); film each glass, mirror or "
                               "opening from in front while the pulses play")
@@ -670,6 +693,10 @@ def _figure(x, fs, onsets: Onsets, rows: list[dict], path) -> None:
     b.scatter(times, [1 - r["p_open"] for r in rows], c=["tab:blue" if not r["open"] else "tab:orange" for r in rows],
               s=14, label="p(closed)")
     b.plot(times, [r["depth_m"] / 3 for r in rows], color="tab:gray", lw=0.8, label="depth / 3 m")
+    for r in rows:  # a posed capture: the hole each frame faces
+        if r.get("hole", "") != "":
+            b.annotate(f"hole {r['hole']}", (r["time_s"], 1 - r["p_open"]), xytext=(0, 6), textcoords="offset points",
+                       fontsize=7, ha="center")
     b.set_ylim(-0.05, 1.05)
     b.set_xlabel("time (s)")
     b.set_ylabel("EchoCNN")
@@ -680,15 +707,18 @@ def _figure(x, fs, onsets: Onsets, rows: list[dict], path) -> None:
 
 
 def simulate_capture(scene, folder, n_pulses: int = 20, fps: float = 4.0, camera=None, seed: int = 0,
-                     audio_codec: str = "flac", snr_db: float = 30.0, progress: bool = False) -> dict:
+                     audio_codec: str = "flac", snr_db: float = 30.0, video: tuple[int, int, float] | None = None,
+                     progress: bool = False) -> dict:
     """A phone capture of a scene as a user brings it to ``vrecho capture``, made by the simulator:
     the device walks the scene's path (:func:`~vrecho.scene.walkthrough_path` if it has none)
     for ``n_pulses`` seconds playing the pulse train; ``capture.mkv`` (H.264 pictures at ``fps``
     and the microphone's sound; ``audio_codec`` "flac", or "aac" in ``capture.mp4``), the
     pictures' poses as COLMAP's text model in ``poses/`` (numbered from 1 at ``fps``, as ffmpeg
     extracts them), and the depth camera's scan fused into ``mesh.ply``. Each pulse is heard
-    through the room's response where the device is when it plays. Returns the paths, and the
-    true onsets (s) and device poses of the pulses."""
+    through the room's response where the device is when it plays. ``video`` (width, height,
+    rate): the video as a phone writes it instead, each rendered picture scaled up and shown
+    until the next, with a little sensor noise. Returns the paths, and the true onsets (s) and
+    device poses of the pulses."""
     import dataclasses
 
     import open3d as o3d
@@ -721,11 +751,26 @@ def simulate_capture(scene, folder, n_pulses: int = 20, fps: float = 4.0, camera
     world = World(scene)
     views = [render_view(world, camera_pose(p, f), camera)
              for p, f in tqdm(list(zip(pos, fwd)), desc="render pictures", unit="picture", disable=not progress)]
-    video = folder / ("capture.mkv" if audio_codec == "flac" else "capture.mp4")
-    write_video(video, np.stack([np.round(255 * v.gray).astype(np.uint8) for v in views]), fps, x, FS, audio_codec)
+    path = folder / ("capture.mkv" if audio_codec == "flac" else "capture.mp4")
+    gray = [np.round(255 * v.gray).astype(np.uint8) for v in views]
+    if video is None:
+        write_video(path, np.stack(gray), fps, x, FS, audio_codec)
+    else:
+        from PIL import Image
+
+        width, height, rate = video
+        big = [np.asarray(Image.fromarray(g).resize((width, height), Image.BILINEAR), np.int16) for g in gray]
+
+        def frames():
+            for i in range(int(duration * rate)):
+                noise = rng.integers(-2, 3, (height, width), dtype=np.int16)
+                yield np.clip(big[min(int(i / rate * fps), len(big) - 1)] + noise, 0, 255).astype(np.uint8)
+
+        write_video(path, tqdm(frames(), total=int(duration * rate), desc="encode video", unit="frame",
+                               disable=not progress), rate, x, FS, audio_codec)
     names = [f"{k + 1:06d}.png" for k in range(len(views))]
     colmap.write_model(folder / "poses", colmap.pinhole(camera.intrinsics, camera.width, camera.height), names,
                        np.stack([v.pose for v in views]))
     o3d.io.write_triangle_mesh(str(folder / "mesh.ply"), fuse(views, progress=progress))
-    return {"video": video, "poses": folder / "poses", "mesh": folder / "mesh.ply", "fps": fps,
+    return {"video": path, "poses": folder / "poses", "mesh": folder / "mesh.ply", "fps": fps,
             "onsets_s": onsets / FS, "pulse_poses": np.stack(poses)}

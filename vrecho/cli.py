@@ -113,7 +113,7 @@ def _capture(args) -> int:
     from .capture import run
 
     done = run(args.out, args.video, args.audio, args.images, args.poses, args.mesh, args.image_fps, args.labels,
-               progress=not args.quiet)
+               args.emitter_distance, progress=not args.quiet)
     rows, result = done["rows"], done["result"]
     n_open = sum(r["open"] for r in rows)
     print(f"{len(rows)} frames: {n_open} open, {len(rows) - n_open} closed "
@@ -223,7 +223,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "1 s frames and ask EchoCNN about each; writes frames.csv, capture.png and the "
                                    "picture at each frame (images.npz). With --poses and --mesh, also repairs the "
                                    "mesh (initial.ply, repaired.ply, report.json, before_after.png, scan/ for "
-                                   "`vrecho export`).")
+                                   "`vrecho export`). The pulse train for the second phone to play: "
+                                   "vrecho/assets/pulse_train.wav (python3 -c 'import vrecho.capture as c; "
+                                   "print(c.PULSE_TRAIN_WAV)').")
     c.add_argument("video", type=Path, nargs="?", default=None, help="the video (MP4, MOV, MKV) with its sound")
     c.add_argument("--audio", type=Path, default=None, help="a sound file (WAV, FLAC) instead of a video")
     c.add_argument("--images", type=Path, default=None,
@@ -236,6 +238,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--mesh", type=Path, default=None, help="with --poses: the scan's mesh (.ply or .obj) to repair")
     c.add_argument("--labels", choices=("echocnn", "echocnn-only"), default="echocnn",
                    help="who decides what each hole is (as for reconstruct; default: echocnn)")
+    c.add_argument("--emitter-distance", type=float, default=None, metavar="M",
+                   help="metres from the playing loudspeaker to the filming microphone (default 0.07, "
+                        "PROTOCOL.md's device: the second phone held against the first)")
     c.add_argument("--out", type=Path, required=True, help="output folder")
     c.add_argument("--quiet", action="store_true", help="no progress bars")
     c.set_defaults(func=_capture)
