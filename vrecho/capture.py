@@ -14,9 +14,11 @@ door slam or lost to a dropout, the microphone clips. :func:`find_onsets` finds 
 3. **The train.** The period is measured (the median spacing of candidates 0.95 to 1.05 nominal
    periods apart: the clocks' drift); a candidate is a pulse when another lies one to four whole
    periods away (within ``tolerance_s`` per period): a clap or a door does not recur on the
-   period, and pulses missing on both sides of one do not lose it. Where two pulses lie a whole
-   number of periods apart, the pulses between are missing; where the gap is not whole (the
-   player paused, or looped its file), the train starts again and nothing is missing. A
+   period, and pulses missing on both sides of one do not lose it (nor does one alone between
+   two pauses, as loud as the train to 1.5 dB). Where two pulses lie a whole number of periods
+   apart (to a millisecond a period), the pulses between are missing; where the gap is not
+   whole (the player paused, or looped its file), the train starts again and nothing is
+   missing. A
    stronger echo is not taken for the direct sound: the onset is the highest lag within a
    quarter millisecond of the first, within 20 ms before the peak, whose envelope reaches half
    of it.
@@ -138,20 +140,15 @@ def find_onsets(audio, fs: int = FS, emitted=None, period_s: float = PERIOD_S, m
         support[j:] |= ok
         support[:-j] |= ok
     # The direct sound comes as loud every time (the loudspeaker stays beside the microphone):
-    # two noise peaks that happen to lie periods apart are far weaker than the train.
+    # two noise peaks that happen to lie periods apart are far weaker than the train, and a
+    # pulse alone between two pauses is as strong as the rest.
     if support.any():
-        support &= env[peaks] >= 0.1 * np.median(env[peaks[support]])
+        level = np.median(env[peaks[support]])
+        support = (support & (env[peaks] >= 0.1 * level)) | (np.abs(20 * np.log10(env[peaks] / level)) <= 1.5)
     idx = peaks[support]
     if len(idx) < 2:
         raise VrechoError(f"audio: no pulse train found: pulses do not recur every {period_s:g} s "
                           f"(within {tolerance_s * 1000:.0f} ms)")
-    # Missing pulses: where a gap between two found is a whole number of periods (a gap that is
-    # not, the player paused or looped, is a new start and misses nothing).
-    missing = []
-    for a, b in zip(idx[:-1], idx[1:]):
-        k = int(round((b - a) / period))
-        if k >= 2 and abs(b - a - k * period) <= tol * k:
-            missing += [a + j * (b - a) / k for j in range(1, k)]
     # The direct sound is the first strong arrival: an echo may outdo it by a little.
     lead, lobe = int(0.02 * fs), max(int(0.00025 * fs), 3)  # a quarter millisecond: past the main lobe, before any echo
     for j, i in enumerate(idx):
@@ -162,8 +159,14 @@ def find_onsets(audio, fs: int = FS, emitted=None, period_s: float = PERIOD_S, m
     gaps = np.diff(samples)
     k = np.round(gaps / period)
     whole = (k >= 1) & (np.abs(gaps - k * period) <= tol * np.maximum(k, 1))
-    period_fit = float(np.median(gaps[whole] / k[whole])) / fs if whole.any() else period / fs
-    return Onsets(samples, 20 * np.log10(env[idx] / floor), np.array(missing), period_fit, fs)
+    period = float(np.median(gaps[whole] / k[whole])) if whole.any() else period
+    # Missing pulses: where two found lie a whole number of periods apart, to a millisecond a
+    # period (the player's clock keeps the beat to a sample); any other gap (the player paused,
+    # or looped its file) starts the train again and misses nothing.
+    k = np.round(gaps / period).astype(int)
+    missing = [a + j * g / m for a, g, m in zip(samples, gaps, k)
+               if m >= 2 and abs(g - m * period) <= 0.001 * fs * m for j in range(1, m)]
+    return Onsets(samples, 20 * np.log10(env[idx] / floor), np.array(missing), period / fs, fs)
 
 
 def cut_frames(audio, onsets: Onsets, length_s: float = 1.0, mic_offset_m: float | None = None) -> np.ndarray:
@@ -668,18 +671,18 @@ def run(out, video=None, audio=None, images=None, poses=None, mesh=None, image_f
         w.writerows(rows)
     if frame_pictures is not None:
         np.savez_compressed(out / "images.npz", time_s=times, gray=frame_pictures)
-    _figure(x, fs, onsets, rows, out / "capture.png")
+    _figure(x, fs, onsets, rows, out / "capture.png", None if result is None else result.decisions)
     return {"rows": rows, "result": result}
 
 
-def _figure(x, fs, onsets: Onsets, rows: list[dict], path) -> None:
+def _figure(x, fs, onsets: Onsets, rows: list[dict], path, decisions=None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     t = np.arange(len(x)) / fs
-    fig, (a, b) = plt.subplots(2, 1, figsize=(11, 5), sharex=True)
+    fig, (a, b) = plt.subplots(2, 1, figsize=(13, 5), sharex=True)
     step = max(len(x) // 200_000, 1)
     a.plot(t[::step], x[::step], lw=0.4, color="0.3")
     for s in onsets.seconds:
@@ -689,18 +692,23 @@ def _figure(x, fs, onsets: Onsets, rows: list[dict], path) -> None:
     a.set_ylabel("recording")
     a.set_title(f"{len(onsets.samples)} pulses found (green), {len(onsets.missing)} missing (red); "
                 f"period {onsets.period_s:.5f} s")
-    times = [r["time_s"] for r in rows]
-    b.scatter(times, [1 - r["p_open"] for r in rows], c=["tab:blue" if not r["open"] else "tab:orange" for r in rows],
-              s=14, label="p(closed)")
+    times = np.array([r["time_s"] for r in rows])
+    p_closed = np.array([1 - r["p_open"] for r in rows])
     b.plot(times, [r["depth_m"] / 3 for r in rows], color="tab:gray", lw=0.8, label="depth / 3 m")
-    for r in rows:  # a posed capture: the hole each frame faces
-        if r.get("hole", "") != "":
-            b.annotate(f"hole {r['hole']}", (r["time_s"], 1 - r["p_open"]), xytext=(0, 6), textcoords="offset points",
-                       fontsize=7, ha="center")
+    if decisions is None:
+        b.scatter(times, p_closed, c=["tab:orange" if r["open"] else "tab:blue" for r in rows], s=14,
+                  label="p(closed): blue closed, orange open")
+    else:  # a posed capture: the frames coloured by the hole they face, and what the hole was judged
+        hole = np.array([r.get("hole", -1) if r.get("hole", "") != "" else -1 for r in rows])
+        b.scatter(times[hole < 0], p_closed[hole < 0], color="0.7", s=10, label="p(closed), facing no hole")
+        for h in sorted(set(hole[hole >= 0])):
+            d = decisions[h]
+            b.scatter(times[hole == h], p_closed[hole == h], color=plt.cm.tab10(h % 10), s=16,
+                      label=f"hole {h}: {d.state}{' ' + d.material if d.material else ''} (p {d.p_closed:.2f})")
     b.set_ylim(-0.05, 1.05)
     b.set_xlabel("time (s)")
     b.set_ylabel("EchoCNN")
-    b.legend(loc="upper right", fontsize=8)
+    b.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
