@@ -141,33 +141,51 @@ class _Track:
         k = max(bisect.bisect_right(t, t[-1] - span_s) - 1, 0)
         return float(self.dists[k] - self.dists[-1])
 
-    def in_the_way(self, miss_m: float, span_s: float = 0.6) -> bool | None:
+    def in_the_way(self, miss_m: float, spans_s=(0.6, 0.45, 0.32)) -> bool | None:
         """Whether the wearer will pass within ``miss_m`` of the surface (closest point of
         approach). A point at lateral offset ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, a
         quadratic in t (fitted to the last ``span_s``) whose minimum is a^2; a surface straight
         ahead has a = 0. True when a^2 lies below miss_m^2 by two standard errors of the fit
         (and not far below 0, which no steady motion gives), False when above by two, None while
         it cannot tell (a short track, a far surface: the minimum is then an extrapolation, and a
-        head's bob hides the curvature)."""
-        t = np.array(self.times)
-        keep = t >= t[-1] - span_s
-        if t[-1] - t[keep][0] < 0.9 * span_s or keep.sum() < 8:
-            return None
-        tt = t[keep] - t[-1]
-        y = np.array(self.dists)[keep] ** 2
-        x = np.stack([tt ** 2, tt, np.ones_like(tt)], axis=1)
-        inv = np.linalg.inv(x.T @ x)
-        p2, p1, p0 = coef = inv @ (x.T @ y)
-        cov = inv * float(np.sum((y - x @ coef) ** 2)) / max(len(y) - 3, 1)
-        if p2 <= 1e-3:  # not nearing at a steady pace (starting, stopping): cannot tell yet
-            return None
-        a2 = p0 - p1 ** 2 / (4 * p2)
-        g = np.array([p1 ** 2 / (4 * p2 ** 2), -p1 / (2 * p2), 1.0])
-        sigma = float(np.sqrt(max(g @ cov @ g, 0.0)))
-        if -miss_m ** 2 < a2 - 2 * sigma and a2 + 2 * sigma < miss_m ** 2:  # far below 0 is a misfit
-            return True
-        if a2 - 2 * sigma > miss_m ** 2:
-            return False
+        head's bob hides the curvature). The longest of ``spans_s`` that tells answers (a track
+        may have picked up another echo's history where the two crossed)."""
+        # Plain floats: some 15 points a fit, where a dozen array calls would cost more than the sums.
+        t_last = self.times[-1]
+        times, dists = list(self.times), list(self.dists)
+        for span_s in spans_s:
+            first = bisect.bisect_left(times, t_last - span_s)
+            if t_last - times[first] < 0.9 * span_s or len(times) - first < 8:
+                continue
+            tt = [u - t_last for u in times[first:]]
+            y = [d * d for d in dists[first:]]
+            n = len(tt)
+            s1 = sum(tt)
+            s2 = sum(u * u for u in tt)
+            s3 = sum(u * u * u for u in tt)
+            s4 = sum(u * u * u * u for u in tt)
+            b2, b1, b0 = sum(u * u * v for u, v in zip(tt, y)), sum(u * v for u, v in zip(tt, y)), sum(y)
+            # Least squares of y on (t^2, t, 1): the normal equations' matrix and its inverse (cofactors).
+            m = ((s4, s3, s2), (s3, s2, s1), (s2, s1, float(n)))
+            c00, c01, c02 = s2 * n - s1 * s1, -(s3 * n - s1 * s2), s3 * s1 - s2 * s2
+            c11, c12, c22 = s4 * n - s2 * s2, -(s4 * s1 - s3 * s2), s4 * s2 - s3 * s3
+            det = m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02
+            if abs(det) < 1e-18:
+                continue
+            inv = ((c00 / det, c01 / det, c02 / det), (c01 / det, c11 / det, c12 / det), (c02 / det, c12 / det, c22 / det))
+            xy = (b2, b1, b0)
+            p2, p1, p0 = (sum(r[k] * xy[k] for k in range(3)) for r in inv)
+            if p2 <= 1e-3:  # not nearing at a steady pace (starting, stopping): cannot tell yet
+                continue
+            rss = max(sum(v * v for v in y) - (p2 * b2 + p1 * b1 + p0 * b0), 0.0)
+            g = (p1 ** 2 / (4 * p2 ** 2), -p1 / (2 * p2), 1.0)
+            var = sum(g[r] * inv[r][c] * g[c] for r in range(3) for c in range(3)) * rss / max(n - 3, 1)
+            a2 = p0 - p1 ** 2 / (4 * p2)
+            sigma = max(var, 0.0) ** 0.5
+            if -miss_m ** 2 < a2 - 2 * sigma and a2 + 2 * sigma < miss_m ** 2:  # far below 0 is a misfit
+                return True
+            if a2 - 2 * sigma > miss_m ** 2:
+                return False
         return None
 
 
@@ -219,12 +237,15 @@ class BoundaryMonitor:
         self._buf = np.zeros(self.period * 3)
         self._valid = np.zeros(self.period * 3, bool)
         self._now = 0  # samples received so far (= samples played: one clock)
+        self._judged = 0  # samples received at the last judgement
         self._tracks: list[_Track] = []
         self._pulse_done = -1  # last pulse committed to the tracks
         self._direct_delay: float | None = None  # samples from emission to the direct peak (latency + s / c)
         self._alert = Alert()
         self._level = "clear"
         self._kernels: dict[int, np.ndarray] = {}
+        lag = np.arange(self.window + len(self.probe), dtype=float)  # the direct sound's sidelobes by lag
+        self._sidelobe = 10 ** (-(32 + 6 * np.log2(np.maximum(lag, 1) / (0.5 * len(self.probe)) + 1)) / 20)
 
     def _kernel(self, n: int) -> np.ndarray:
         """The analytic matched filter for an FFT of ``n``: the probe's conjugate spectrum on
@@ -236,7 +257,7 @@ class BoundaryMonitor:
 
             half = np.conj(fft.rfft(self.probe, n))
             half[1:(n + 1) // 2] *= 2.0
-            self._kernels[n] = half
+            self._kernels[n] = half.astype(np.complex64)  # single precision: a sample's thousandth is ample
         return self._kernels[n]
 
     # -- The callback ------------------------------------------------------------------------------
@@ -304,16 +325,20 @@ class BoundaryMonitor:
         size = len(self._buf)
         for lo in range(0, len(x), size):  # a block longer than the buffer: keep what fits, in order
             chunk, ok = x[lo:lo + size], valid[lo:lo + size]
-            idx = (self._now + np.arange(len(chunk))) % size
-            self._buf[idx] = chunk
-            self._valid[idx] = ok
+            at = self._now % size
+            first = min(len(chunk), size - at)  # up to the ring's end, then from its start
+            self._buf[at:at + first], self._valid[at:at + first] = chunk[:first], ok[:first]
+            self._buf[:len(chunk) - first], self._valid[:len(chunk) - first] = chunk[first:], ok[first:]
             self._now += len(chunk)
             if lo + size < len(x):
                 self._update()
 
     def _samples(self, start: int, stop: int) -> tuple[np.ndarray, bool]:
         size = len(self._buf)
-        idx = np.arange(start, stop) % size
+        a, b = start % size, (start % size) + (stop - start)
+        if b <= size:
+            return self._buf[a:b], bool(self._valid[a:b].all())
+        idx = np.arange(start, stop) % size  # across the ring's end
         return self._buf[idx], bool(self._valid[idx].all())
 
     def _update(self) -> None:
@@ -328,21 +353,32 @@ class BoundaryMonitor:
             self._pulse_done = k
         current = self._now // self.period
         partial = None
-        if (current > self._pulse_done and self._now - current * self.period > len(self.probe)
-                and self._near_a_threshold(current * self.period / self.fs)):
-            partial = self._detect(current, self._now)  # its echo may cross a threshold: do not wait
+        e = current * self.period
+        if current > self._pulse_done and self._now - e > len(self.probe):
+            # A surface in the way near a threshold: its echo of this pulse may cross it. Looked
+            # for in the block in which that echo ends (as predicted, give or take 1.5 ms, a
+            # quarter metre), not in every block.
+            margin = 0.0015 * self.fs
+            if any(self._judged < e + end + margin and self._now >= e + end - margin
+                   for end in self._echo_ends(e / self.fs)):
+                partial = self._detect(current, self._now)
         self._judge(partial, current)
+        self._judged = self._now
 
-    def _near_a_threshold(self, t: float) -> bool:
-        """Whether a surface in the way may cross an alert threshold with the pulse emitted at
-        ``t`` (within 0.3 m of a distance threshold, or 0.5 s of the time-to-contact one)."""
+    def _echo_ends(self, t: float) -> list[float]:
+        """For each surface in the way that may cross an alert threshold with the pulse emitted at
+        ``t`` (within 0.3 m of a distance threshold, or 0.5 s of the time-to-contact one): the
+        lag (samples from the emission) at which its echo will have wholly arrived."""
+        out = []
         for tr in self._tracks:
             if tr.ahead and t - tr.approached_at <= 1.0:
                 d = tr.predict(t)
                 closing = -(tr.speed or 0.0)
                 if d < self.caution_m + 0.3 or (closing > 0.05 and d / closing < self.caution_ttc_s + 0.5):
-                    return True
-        return False
+                    s = self.mic_offset_m
+                    path = np.sqrt((2 * max(d, 0.0)) ** 2 + s ** 2) - s
+                    out.append((self._direct_delay or 0.0) + path / SPEED_OF_SOUND * self.fs + len(self.probe))
+        return out
 
     def _detect(self, k: int, stop: int):
         """Echo distances (m) and strengths of pulse ``k`` from its samples up to ``stop``, keeping
@@ -354,8 +390,8 @@ class BoundaryMonitor:
         from scipy import fft
 
         n = fft.next_fast_len(len(x) + len(self.probe), real=True)
-        spec = np.zeros(n, complex)
-        half = fft.rfft(x, n)
+        spec = np.zeros(n, np.complex64)
+        half = fft.rfft(x.astype(np.float32), n)
         spec[:len(half)] = half * self._kernel(n)
         env = np.abs(fft.ifft(spec, overwrite_x=True)[:len(x) - len(self.probe) + 1])  # lags where the whole probe fits: ended echoes
         head = env[:self.latency_max]
@@ -373,15 +409,15 @@ class BoundaryMonitor:
         if lo >= len(env) - 2:
             return []
         seg = env[lo:]
-        noise = np.median(seg[::4]) + 1e-12  # every 4th lag: the floor, at a quarter of the cost
+        quarter = seg[::4]  # every 4th lag: the floor, at a quarter of the cost
+        noise = float(np.partition(quarter, len(quarter) // 2)[len(quarter) // 2]) + 1e-12
         # The direct sound's matched-filter sidelobes fall off with lag; an echo must rise above both.
-        lag = np.arange(lo, len(env)) - ref
-        sidelobe = peak_direct * 10 ** (-(32 + 6 * np.log2(np.maximum(lag, 1) / (0.5 * len(self.probe)) + 1)) / 20)
-        floor = np.maximum(self.threshold * noise, sidelobe)
-        is_peak = (seg[1:-1] > seg[:-2]) & (seg[1:-1] >= seg[2:]) & (seg[1:-1] > floor[1:-1])
-        peaks = np.flatnonzero(is_peak) + 1 + lo
-        if not len(peaks):
+        floor = np.maximum(self.threshold * noise, peak_direct * self._sidelobe[lo - int(ref):len(env) - int(ref)])
+        above = np.flatnonzero(seg[1:-1] > floor[1:-1]) + 1  # few: the echoes' main lobes
+        above = above[(seg[above] > seg[above - 1]) & (seg[above] >= seg[above + 1])]  # their local maxima
+        if not len(above):
             return []
+        peaks = above + lo
         s = self.mic_offset_m
         path = SPEED_OF_SOUND * (parabolic_peaks(env, peaks) - ref) / self.fs + s
         d = 0.5 * np.sqrt(np.maximum(path ** 2 - s ** 2, 0.0))
@@ -420,11 +456,10 @@ class BoundaryMonitor:
                  if len(tr.times) >= 10 and tr.speed is not None and abs(tr.speed) < 0.25 and tr.d_hat >= self.miss_m]
         for tr in updated:
             tr.ahead = None
-            if t - tr.approached_at <= 1.0:
-                # The longest recent stretch that tells (a track may have picked up another
-                # echo's history where the two crossed).
-                tr.ahead = next((r for span in (0.6, 0.45, 0.32) if (r := tr.in_the_way(self.miss_m, span)) is not None),
-                                None)
+            closing = -(tr.speed or 0.0)
+            soon = tr.d_hat < self.caution_m + 1.0 or (closing > 0.05 and tr.d_hat / closing < self.caution_ttc_s + 1.5)
+            if t - tr.approached_at <= 1.0 and soon:  # the fit only where an alert may come within a second or so
+                tr.ahead = tr.in_the_way(self.miss_m)
                 if tr.ahead and tr.explained_by(still):
                     tr.ahead = False
         self._tracks = [tr for tr in self._tracks if t - tr.times[-1] <= 0.3]
@@ -496,8 +531,11 @@ def _zero_runs(x: np.ndarray, min_len: int) -> np.ndarray:
 def _clipped(x: np.ndarray) -> bool:
     """Flat tops: three or more consecutive samples at the block's largest magnitude (a clipping
     converter or limiter holds its rail; a real signal does not)."""
-    m = float(np.max(np.abs(x), initial=0.0))
+    a = np.abs(x)
+    m = float(a.max(initial=0.0))
     if m == 0.0:
         return False
-    top = np.abs(x) >= m * (1 - 1e-6)
+    top = a >= m * (1 - 1e-6)
+    if np.count_nonzero(top) < 3:  # the usual block: one loudest sample
+        return False
     return bool(np.any(top[2:] & top[1:-1] & top[:-2]))
