@@ -28,8 +28,9 @@ pulse:
    the surface stops approaching for a second).
 
 The alert is recomputed every block from what has arrived: while a surface in the way is near a
-threshold, each block also analyses the pulse still arriving, so an echo that crosses the
-threshold raises the alert in the block in which that echo ends.
+threshold, the block in which its echo of the pulse still arriving is predicted to end (give or
+take 1.5 ms) also analyses that pulse, so an echo that crosses the threshold raises the alert in
+the block in which that echo ends.
 
 Robustness: clipped samples are flagged (the timing survives clipping); runs of exact zeros
 (dropouts) and non-finite samples are flagged and their pulse skipped; any block size, changing
