@@ -52,7 +52,7 @@ import numpy as np
 
 from .acoustics import SPEED_OF_SOUND
 from .errors import VrechoError
-from .signals import parabolic_peaks
+from .signals import analytic_envelope, analytic_filter, parabolic_peaks
 
 
 def ranging_probe(fs: int, duration_s: float = 0.005, f0: float = 4000.0, f1: float = 20000.0) -> np.ndarray:
@@ -167,10 +167,11 @@ class _Track:
             s4 = sum(u * u * u * u for u in tt)
             b2, b1, b0 = sum(u * u * v for u, v in zip(tt, y)), sum(u * v for u, v in zip(tt, y)), sum(y)
             # Least squares of y on (t^2, t, 1): the normal equations' matrix and its inverse (cofactors).
-            m = ((s4, s3, s2), (s3, s2, s1), (s2, s1, float(n)))
+            # The normal equations' matrix ((s4, s3, s2), (s3, s2, s1), (s2, s1, n)) is symmetric: its
+            # cofactors over its determinant are its inverse.
             c00, c01, c02 = s2 * n - s1 * s1, -(s3 * n - s1 * s2), s3 * s1 - s2 * s2
             c11, c12, c22 = s4 * n - s2 * s2, -(s4 * s1 - s3 * s2), s4 * s2 - s3 * s3
-            det = m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02
+            det = s4 * c00 + s3 * c01 + s2 * c02
             if abs(det) < 1e-18:
                 continue
             inv = ((c00 / det, c01 / det, c02 / det), (c01 / det, c11 / det, c12 / det), (c02 / det, c12 / det, c22 / det))
@@ -249,16 +250,10 @@ class BoundaryMonitor:
         self._sidelobe = 10 ** (-(32 + 6 * np.log2(np.maximum(lag, 1) / (0.5 * len(self.probe)) + 1)) / 20)
 
     def _kernel(self, n: int) -> np.ndarray:
-        """The analytic matched filter for an FFT of ``n``: the probe's conjugate spectrum on
-        positive frequencies only (doubled), so one inverse FFT gives the correlation and its
-        Hilbert pair at once (its magnitude is the envelope). Cached per size: a pulse still
-        arriving is filtered with a shorter FFT."""
-        if n not in self._kernels:
-            from scipy import fft
-
-            half = np.conj(fft.rfft(self.probe, n))
-            half[1:(n + 1) // 2] *= 2.0
-            self._kernels[n] = half.astype(np.complex64)  # single precision: a sample's thousandth is ample
+        """The probe's analytic matched filter for an FFT of ``n`` (:func:`~vrecho.signals.analytic_filter`),
+        cached per size: a pulse still arriving is filtered with a shorter FFT."""
+        if n not in self._kernels:  # single precision: a sample's thousandth is ample
+            self._kernels[n] = analytic_filter(self.probe, n).astype(np.complex64)
         return self._kernels[n]
 
     # -- The callback ------------------------------------------------------------------------------
@@ -391,10 +386,7 @@ class BoundaryMonitor:
         from scipy import fft
 
         n = fft.next_fast_len(len(x) + len(self.probe), real=True)
-        spec = np.zeros(n, np.complex64)
-        half = fft.rfft(x.astype(np.float32), n)
-        spec[:len(half)] = half * self._kernel(n)
-        env = np.abs(fft.ifft(spec, overwrite_x=True)[:len(x) - len(self.probe) + 1])  # lags where the whole probe fits: ended echoes
+        env = analytic_envelope(x.astype(np.float32), self._kernel(n), n)[:len(x) - len(self.probe) + 1]  # lags where the whole probe fits: ended echoes
         head = env[:self.latency_max]
         if not len(head):
             return None

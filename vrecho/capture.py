@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import VrechoError
-from .signals import FS, PERIOD_S, parabolic_peaks
+from .signals import FS, PERIOD_S, analytic_envelope, analytic_filter, parabolic_peaks
 
 
 @dataclass
@@ -80,11 +80,7 @@ def matched_envelope(audio, emitted, fs: int = FS) -> np.ndarray:
     if s.ndim != 1 or not 8 <= s.size <= x.size:
         raise VrechoError(f"emitted: expected a 1-D pulse shorter than the recording ({x.size} samples), got shape {s.shape}")
     n = fft.next_fast_len(x.size + s.size, real=True)
-    spec = fft.rfft(x, n) * np.conj(fft.rfft(s, n))
-    analytic = np.zeros(n, complex)  # one inverse FFT gives the correlation and its Hilbert pair
-    analytic[:spec.size] = spec
-    analytic[1:(n + 1) // 2] *= 2.0
-    return np.abs(fft.ifft(analytic))[:x.size - s.size + 1] / np.linalg.norm(s)
+    return analytic_envelope(x, analytic_filter(s, n), n)[:x.size - s.size + 1] / np.linalg.norm(s)
 
 
 def find_onsets(audio, fs: int = FS, emitted=None, period_s: float = PERIOD_S, min_snr_db: float = 12.0,
@@ -399,21 +395,6 @@ def read_audio(path) -> tuple[np.ndarray, int]:
     return x.mean(axis=1), int(fs)
 
 
-def read_mesh(path):
-    """A user's triangle mesh (.ply or .obj) with open3d; one error if it holds no triangles."""
-    import open3d as o3d
-
-    path = Path(path)
-    if path.suffix.lower() not in (".ply", ".obj"):
-        raise VrechoError(f"mesh: {path} is not a .ply or .obj file")
-    if not path.is_file():
-        raise VrechoError(f"mesh: {path} does not exist")
-    mesh = o3d.io.read_triangle_mesh(str(path))
-    if not len(mesh.triangles):
-        raise VrechoError(f"mesh: {path} holds no triangles (expected a triangle mesh, .ply or .obj)")
-    return mesh
-
-
 def interpolate_poses(times, key_times, key_poses, max_gap_s: float = MAX_POSE_GAP_S) -> tuple[np.ndarray, np.ndarray]:
     """Camera-to-world poses (K, 4, 4) at ``times`` (s) from posed pictures at ``key_times``:
     positions linear and rotations spherical between the two pictures around each time, or the
@@ -591,7 +572,7 @@ def run(out, video=None, audio=None, images=None, poses=None, mesh=None, image_f
 
     from .classifier import load_classifier
     from .colmap import image_times
-    from .io import ensure_writable_dir
+    from .io import ensure_writable_dir, read_mesh
     from .reconstruct import LABELS, facing, reconstruct, write
     from .render import crop_view
     from .signals import probe

@@ -1,4 +1,5 @@
-"""Files written whole or not at all: a temporary file beside the target, renamed into place."""
+"""Files written whole or not at all (a temporary file beside the target, renamed into place),
+and a user's mesh read with one clear error."""
 
 from __future__ import annotations
 
@@ -49,3 +50,18 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
 
 def atomic_save_npy(path: str | Path, array: np.ndarray) -> Path:
     return _atomic(Path(path), lambda f: np.save(f, array))
+
+
+def read_mesh(path: str | Path):
+    """A user's triangle mesh (.ply or .obj) with open3d; one error if it is not one."""
+    import open3d as o3d
+
+    path = Path(path)
+    if path.suffix.lower() not in (".ply", ".obj"):
+        raise VrechoError(f"mesh: {path} is not a .ply or .obj file")
+    if not path.is_file():
+        raise VrechoError(f"mesh: {path} does not exist")
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    if not len(mesh.triangles):
+        raise VrechoError(f"mesh: {path} holds no triangles (expected a triangle mesh, .ply or .obj)")
+    return mesh

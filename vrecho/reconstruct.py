@@ -807,7 +807,7 @@ def load_scan(folder: str | Path, voxel_m: float = 0.03, progress: bool = False)
         (microphone 7 cm above the loudspeaker, both at the camera), ``fs`` (Hz), ``emitted``
         (the probe, 1-D at ``fs``). Without it only oracle labels can repair the scan.
     """
-    import open3d as o3d
+    from .io import read_mesh
 
     folder = Path(folder)
     path = folder / "frames.npz"
@@ -827,9 +827,7 @@ def load_scan(folder: str | Path, voxel_m: float = 0.03, progress: bool = False)
     views = [View(g, d.astype(np.float32), K.astype(float), p.astype(float)) for g, d, p in zip(gray, depth, pose)]
     mesh_path = folder / "mesh.ply"
     if mesh_path.is_file():
-        mesh = o3d.io.read_triangle_mesh(str(mesh_path))
-        if not len(mesh.triangles):
-            raise VrechoError(f"scan: {mesh_path} holds no triangles")
+        mesh = read_mesh(mesh_path)
     else:
         mesh = fuse(views, voxel_m, progress=progress)
     echoes = None

@@ -199,6 +199,30 @@ def pulse_train(sound: np.ndarray, n_periods: int, fs: int = FS) -> np.ndarray:
     return out
 
 
+def analytic_filter(sound: np.ndarray, n: int) -> np.ndarray:
+    """The matched filter of ``sound`` for an FFT of ``n``, made analytic: its conjugate spectrum
+    (n // 2 + 1 bins) doubled on the positive frequencies, so that one inverse FFT of a
+    recording's spectrum times it (:func:`analytic_envelope`) gives the correlation and its
+    Hilbert pair at once."""
+    from scipy import fft
+
+    half = np.conj(fft.rfft(sound, n))
+    half[1:(n + 1) // 2] *= 2.0
+    return half
+
+
+def analytic_envelope(x: np.ndarray, kernel: np.ndarray, n: int) -> np.ndarray:
+    """Envelope (n,) of ``x`` correlated with the sound behind ``kernel`` (:func:`analytic_filter`
+    for the same ``n``, at least len(x) + the sound's length): at lag ``l``, how much of the
+    sound starts at sample ``l``. Single-precision inputs give a single-precision answer."""
+    from scipy import fft
+
+    half = fft.rfft(x, n) * kernel
+    spec = np.zeros(n, half.dtype)
+    spec[:half.size] = half
+    return np.abs(fft.ifft(spec, overwrite_x=True))
+
+
 def parabolic_peaks(y: np.ndarray, i: np.ndarray) -> np.ndarray:
     """Peaks' positions to a fraction of a sample (a parabola through three samples; a peak at
     either end of ``y`` stays where it is)."""
