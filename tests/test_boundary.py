@@ -115,6 +115,24 @@ def test_disturbed_input_is_flagged_and_survived(glass):
     assert a is not None and at >= 0.5
 
 
+def test_a_clipped_direct_sound_raises_no_false_alarm():
+    # Clipped at 40 % of its peak, the direct sound's distortion spreads over one probe's length
+    # after it, above the clean sidelobes: it must not read as surfaces a few decimetres away
+    # (this walk raised caution and stop on 37 blocks when it did).
+    door = _walk("open", speed=1.3, seed=1)
+    _, alerts, _ = _run(door, np.clip(door.mic, -0.2, 0.2))
+    assert all(a.level == "clear" for a in alerts)
+    assert any("clipped" in a.flags for a in alerts)
+
+
+def test_a_fast_walk_into_glass_is_warned_in_time():
+    fast = _walk("glass", speed=2.0, seed=3)  # 8 cm a pulse
+    _, alerts, ends = _run(fast)
+    a, _, at = _first(alerts, ends, fast, ("caution", "stop"))
+    assert a is not None and at >= 0.5, at
+    assert 1.6 < alerts[-1].closing_speed_mps < 2.4
+
+
 def test_no_echo_at_all_is_clear_and_says_so():
     mon = BoundaryMonitor(FS)
     rng = np.random.default_rng(0)

@@ -8,13 +8,16 @@ pulse:
 
 1. **Ranging.** Matched filter of the microphone signal with the probe (the envelope of the
    cross-correlation), the device's own direct sound as the time reference (so unknown audio
-   latency cancels), echo peaks above the noise floor and the direct sound's sidelobes, each
-   timed to a fraction of a sample by parabolic interpolation. A surface straight ahead at ``d``
+   latency cancels), echo peaks above the noise floor (``threshold`` times the envelope's
+   median) and the direct sound's sidelobes (when the direct sound is clipped, above the
+   clipped probe's own distortion, which spreads over one probe's length after it), each timed
+   to a fraction of a sample by parabolic interpolation. A surface straight ahead at ``d``
    returns the echo path ``L = sqrt((2 d)^2 + s^2)`` (``s``: emitter to microphone): ``d`` follows.
 2. **Tracking.** Echo distances are chained over pulses into tracks (nearest to each track's
-   prediction, within 12 cm); an alpha-beta filter gives each track's distance and closing
-   speed (it follows a wearer who starts or stops within a few pulses), time to contact is
-   distance / closing speed.
+   prediction, within 12 cm); an alpha-beta filter, started from its first two echoes' speed
+   (a fast walk's echo moves 8 cm a pulse), gives each track's distance and closing speed (it
+   follows a wearer who starts or stops within a few pulses), time to contact is distance /
+   closing speed.
 3. **Alerts with hysteresis.** Only surfaces the wearer moves toward count (``approach_m``
    nearer within 0.8 s, in the last second) and will not pass by: a point at lateral offset
    ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, so a quadratic fit over the last 0.3 to 0.6 s
@@ -27,10 +30,11 @@ pulse:
    *stop* under ``stop_m``; an alert ends only ``hysteresis_m`` beyond its threshold (or when
    the surface stops approaching for a second).
 
-The alert is recomputed every block from what has arrived: while a surface in the way is near a
-threshold, the block in which its echo of the pulse still arriving is predicted to end (give or
-take 1.5 ms) also analyses that pulse, so an echo that crosses the threshold raises the alert in
-the block in which that echo ends.
+The alert is judged again whenever something it rests on changes (a pulse's window completes,
+a surface's approach grows a second old): while a surface in the way is near a threshold, the
+block in which its echo of the pulse still arriving is predicted to end (give or take 1.5 ms)
+also analyses that pulse, so an echo that crosses the threshold raises the alert in the block in
+which that echo ends.
 
 Robustness: clipped samples are flagged (the timing survives clipping); runs of exact zeros
 (dropouts) and non-finite samples are flagged and their pulse skipped; any block size, changing
@@ -109,10 +113,13 @@ class _Track:
             self.d_hat, self.speed = d, None
         else:
             dt = t - self.times[-1]
-            predicted = self.predict(t)
-            r = d - predicted
-            self.d_hat = predicted + alpha * r
-            self.speed = (self.speed or 0.0) + beta * r / max(dt, 1e-3)
+            if self.speed is None:  # the second echo: the speed from the two (a fast walk's echo moves ~8 cm a pulse)
+                self.d_hat, self.speed = d, (d - self.d_hat) / max(dt, 1e-3)
+            else:
+                predicted = self.predict(t)
+                r = d - predicted
+                self.d_hat = predicted + alpha * r
+                self.speed += beta * r / max(dt, 1e-3)
         self.times.append(t)
         self.dists.append(d)
         self.strengths.append(strength)
@@ -151,24 +158,20 @@ class _Track:
         it cannot tell (a short track, a far surface: the minimum is then an extrapolation, and a
         head's bob hides the curvature). The longest of ``spans_s`` that tells answers (a track
         may have picked up another echo's history where the two crossed)."""
-        # Plain floats: some 15 points a fit, where a dozen array calls would cost more than the sums.
-        t_last = self.times[-1]
-        times, dists = list(self.times), list(self.dists)
+        # One array of the fit's terms; each span's sums are a suffix's (some 15 points a fit).
+        times = np.fromiter(self.times, float, len(self.times))
+        tt = times - times[-1]
+        y = np.fromiter(self.dists, float, len(self.dists)) ** 2
+        t2 = tt * tt
+        terms = np.array([tt, t2, t2 * tt, t2 * t2, y, tt * y, t2 * y, y * y])
         for span_s in spans_s:
-            first = bisect.bisect_left(times, t_last - span_s)
-            if t_last - times[first] < 0.9 * span_s or len(times) - first < 8:
+            first = int(np.searchsorted(times, times[-1] - span_s))
+            n = len(tt) - first
+            if -tt[first] < 0.9 * span_s or n < 8:
                 continue
-            tt = [u - t_last for u in times[first:]]
-            y = [d * d for d in dists[first:]]
-            n = len(tt)
-            s1 = sum(tt)
-            s2 = sum(u * u for u in tt)
-            s3 = sum(u * u * u for u in tt)
-            s4 = sum(u * u * u * u for u in tt)
-            b2, b1, b0 = sum(u * u * v for u, v in zip(tt, y)), sum(u * v for u, v in zip(tt, y)), sum(y)
-            # Least squares of y on (t^2, t, 1): the normal equations' matrix and its inverse (cofactors).
-            # The normal equations' matrix ((s4, s3, s2), (s3, s2, s1), (s2, s1, n)) is symmetric: its
-            # cofactors over its determinant are its inverse.
+            s1, s2, s3, s4, b0, b1, b2, yy = terms[:, first:].sum(axis=1).tolist()
+            # Least squares of y on (t^2, t, 1): the normal equations' matrix ((s4, s3, s2),
+            # (s3, s2, s1), (s2, s1, n)) is symmetric: its cofactors over its determinant are its inverse.
             c00, c01, c02 = s2 * n - s1 * s1, -(s3 * n - s1 * s2), s3 * s1 - s2 * s2
             c11, c12, c22 = s4 * n - s2 * s2, -(s4 * s1 - s3 * s2), s4 * s2 - s3 * s3
             det = s4 * c00 + s3 * c01 + s2 * c02
@@ -179,7 +182,7 @@ class _Track:
             p2, p1, p0 = (sum(r[k] * xy[k] for k in range(3)) for r in inv)
             if p2 <= 1e-3:  # not nearing at a steady pace (starting, stopping): cannot tell yet
                 continue
-            rss = max(sum(v * v for v in y) - (p2 * b2 + p1 * b1 + p0 * b0), 0.0)
+            rss = max(yy - (p2 * b2 + p1 * b1 + p0 * b0), 0.0)
             g = (p1 ** 2 / (4 * p2 ** 2), -p1 / (2 * p2), 1.0)
             var = sum(g[r] * inv[r][c] * g[c] for r in range(3) for c in range(3)) * rss / max(n - 3, 1)
             a2 = p0 - p1 ** 2 / (4 * p2)
@@ -213,11 +216,15 @@ class BoundaryMonitor:
     miss_m : float
         A surface the wearer will pass farther from than this (closest point of approach) is
         not in the way: the wall above a door, a corner to one side.
+    threshold : float
+        An echo must rise this many times above the envelope's median (4.5, 13 dB: a mirror
+        2.5 m ahead is heard through pink noise 20 dB below the direct sound; the tracks keep
+        single noise peaks from mattering).
     """
 
     def __init__(self, fs: int = 48000, period_s: float = 0.04, max_range_m: float = 4.0, min_range_m: float = 0.12,
                  mic_offset_m: float = 0.07, caution_ttc_s: float = 2.0, caution_m: float = 1.0, stop_m: float = 0.5,
-                 hysteresis_m: float = 0.1, approach_m: float = 0.12, miss_m: float = 0.4, threshold: float = 6.0):
+                 hysteresis_m: float = 0.1, approach_m: float = 0.12, miss_m: float = 0.4, threshold: float = 4.5):
         if fs not in (44100, 48000):
             raise VrechoError(f"fs: expected 44100 or 48000 Hz, got {fs!r}")
         if not 2 * max_range_m / SPEED_OF_SOUND + 0.006 < period_s <= 0.5:
@@ -243,9 +250,12 @@ class BoundaryMonitor:
         self._tracks: list[_Track] = []
         self._pulse_done = -1  # last pulse committed to the tracks
         self._direct_delay: float | None = None  # samples from emission to the direct peak (latency + s / c)
-        self._alert = Alert()
+        self._alert = self._verdict = Alert()  # the alert returned; the last judgement behind it
+        self._oldest_approach = np.inf  # the earliest approached_at among the surfaces judged
         self._level = "clear"
         self._kernels: dict[int, np.ndarray] = {}
+        self._clipped_floors: dict[int, np.ndarray] = {}
+        self._fft_sizes: dict[int, int] = {}
         lag = np.arange(self.window + len(self.probe), dtype=float)  # the direct sound's sidelobes by lag
         self._sidelobe = 10 ** (-(32 + 6 * np.log2(np.maximum(lag, 1) / (0.5 * len(self.probe)) + 1)) / 20)
 
@@ -255,6 +265,26 @@ class BoundaryMonitor:
         if n not in self._kernels:  # single precision: a sample's thousandth is ample
             self._kernels[n] = analytic_filter(self.probe, n).astype(np.complex64)
         return self._kernels[n]
+
+    def _clipped_sidelobe(self, fraction: float) -> np.ndarray:
+        """The floor beside a clipped direct sound: the matched filter's response to the probe
+        clipped so that ``fraction`` of its samples sit at the rail (its distortion spreads over
+        one probe's length after the peak, up to some 30 dB below it), 6 dB above that, and never
+        below the clean sidelobes. Cached in steps of 5 %."""
+        step = max(1, int(round(fraction * 20)))
+        if step not in self._clipped_floors:
+            from scipy.ndimage import maximum_filter1d
+
+            level = np.quantile(np.abs(self.probe), 1 - step / 20)
+            m = len(self.probe)
+            n = 4 * m
+            x = np.zeros(n - m)
+            x[:m] = np.clip(self.probe, -level, level)
+            env = analytic_envelope(x, analytic_filter(self.probe, n), n)[:n - m]  # past n - m: negative lags
+            profile = np.zeros(max(len(self._sidelobe), n - m))
+            profile[:len(env)] = maximum_filter1d(env / env[0], 9)  # a few samples' slack in timing
+            self._clipped_floors[step] = np.maximum(self._sidelobe, 2.0 * profile[:len(self._sidelobe)])
+        return self._clipped_floors[step]
 
     # -- The callback ------------------------------------------------------------------------------
     def __call__(self, mic, speaker=None) -> Alert:
@@ -295,7 +325,9 @@ class BoundaryMonitor:
             flags.append("clipped")
         self._push(x, valid)
         self._update()
-        self._alert.flags = tuple(dict.fromkeys(self._alert.flags + tuple(flags)))
+        v = self._verdict  # a new Alert per block: one already returned keeps its flags
+        self._alert = Alert(v.level, v.distance_m, v.surface, v.confidence, v.closing_speed_mps, v.time_to_contact_s,
+                            tuple(dict.fromkeys(v.flags + tuple(flags))), v.pulse_time_s)
         return self._alert
 
     def speaker_block(self, n: int) -> np.ndarray:
@@ -342,10 +374,12 @@ class BoundaryMonitor:
         arrived of it."""
         last = (self._now - self.window) // self.period  # newest pulse with a complete window
         oldest = max(self._pulse_done + 1, (self._now - len(self._buf) + self.period) // self.period, 0)
+        changed = False
         for k in range(oldest, last + 1):
             echoes = self._detect(k, k * self.period + self.window)
             if echoes is not None:
                 self._commit(k, echoes)
+                changed = True
             self._pulse_done = k
         current = self._now // self.period
         partial = None
@@ -358,7 +392,10 @@ class BoundaryMonitor:
             if any(self._judged < e + end + margin and self._now >= e + end - margin
                    for end in self._echo_ends(e / self.fs)):
                 partial = self._detect(current, self._now)
-        self._judge(partial, current)
+        # The judgement changes only with the tracks, a pulse still arriving, or when a surface's
+        # approach grows a second old: otherwise the last one stands.
+        if changed or partial or self._now / self.fs - self._oldest_approach > 1.0:
+            self._judge(partial, current)
         self._judged = self._now
 
     def _echo_ends(self, t: float) -> list[float]:
@@ -383,21 +420,28 @@ class BoundaryMonitor:
         x, ok = self._samples(e, min(stop, e + self.window))
         if not ok or len(x) < len(self.probe) + 8:
             return None
-        from scipy import fft
+        n = self._fft_sizes.get(len(x))
+        if n is None:
+            from scipy import fft
 
-        n = fft.next_fast_len(len(x) + len(self.probe), real=True)
+            n = self._fft_sizes[len(x)] = fft.next_fast_len(len(x) + len(self.probe), real=True)
         env = analytic_envelope(x.astype(np.float32), self._kernel(n), n)[:len(x) - len(self.probe) + 1]  # lags where the whole probe fits: ended echoes
         head = env[:self.latency_max]
         if not len(head):
             return None
         d0 = int(np.argmax(head))
-        direct = float(parabolic_peaks(env, np.array([d0]))[0])
+        direct = float(parabolic_peaks(env, (d0,))[0])
         if self._direct_delay is None:
             self._direct_delay = direct
         elif 0.5 < abs(direct - self._direct_delay) <= 3:  # drift; a larger jump is a stray peak: kept out
             self._direct_delay = 0.9 * self._direct_delay + 0.1 * direct
         ref = self._direct_delay
         peak_direct = env[d0]
+        sidelobe = self._sidelobe
+        direct_part = np.abs(x[d0:d0 + len(self.probe)])
+        rail = np.count_nonzero(direct_part >= direct_part.max(initial=0.0) * (1 - 1e-6))
+        if rail >= 3:  # the direct sound clipped: its distortion rises above the sidelobes, near it
+            sidelobe = self._clipped_sidelobe(rail / len(self.probe))
         lo = int(ref + 2 * self.min_range_m / SPEED_OF_SOUND * self.fs)
         if lo >= len(env) - 2:
             return []
@@ -405,7 +449,7 @@ class BoundaryMonitor:
         quarter = seg[::4]  # every 4th lag: the floor, at a quarter of the cost
         noise = float(np.partition(quarter, len(quarter) // 2)[len(quarter) // 2]) + 1e-12
         # The direct sound's matched-filter sidelobes fall off with lag; an echo must rise above both.
-        floor = np.maximum(self.threshold * noise, peak_direct * self._sidelobe[lo - int(ref):len(env) - int(ref)])
+        floor = np.maximum(self.threshold * noise, peak_direct * sidelobe[lo - int(ref):len(env) - int(ref)])
         above = np.flatnonzero(seg[1:-1] > floor[1:-1]) + 1  # few: the echoes' main lobes
         above = above[(seg[above] > seg[above - 1]) & (seg[above] >= seg[above + 1])]  # their local maxima
         if not len(above):
@@ -420,15 +464,28 @@ class BoundaryMonitor:
     def _associate(self, t: float, echoes) -> list[tuple[_Track | None, float, float]]:
         """Each echo (nearest first) with the nearest unclaimed track whose prediction lies within
         12 cm, or None (a new surface)."""
-        predicted = np.array([tr.predict(t) for tr in self._tracks]) if self._tracks else np.zeros(0)
-        free = np.ones(len(predicted), bool)
+        order = sorted(range(len(self._tracks)), key=lambda i: self._tracks[i].predict(t))
+        predicted = [self._tracks[i].predict(t) for i in order]  # ascending, plain floats
+        free = [True] * len(predicted)
         pairs = []
         for d, strength in sorted(echoes):
-            gap = np.where(free, np.abs(predicted - d), np.inf)
-            j = int(np.argmin(gap)) if len(gap) else -1
-            if j >= 0 and gap[j] < 0.12:
+            j, gap = -1, 0.12
+            at = bisect.bisect_left(predicted, d)
+            for i in range(at - 1, -1, -1):  # nearer tracks first, on either side, within 12 cm
+                if d - predicted[i] >= gap:
+                    break
+                if free[i]:
+                    j, gap = i, d - predicted[i]
+                    break
+            for i in range(at, len(predicted)):
+                if predicted[i] - d >= gap:
+                    break
+                if free[i]:
+                    j, gap = i, predicted[i] - d
+                    break
+            if j >= 0:
                 free[j] = False
-                pairs.append((self._tracks[j], d, strength))
+                pairs.append((self._tracks[order[j]], d, strength))
             else:
                 pairs.append((None, d, strength))
         return pairs
@@ -468,9 +525,11 @@ class BoundaryMonitor:
             for tr, d, _ in self._associate(t_pulse, partial):
                 if tr is not None:
                     provisional[id(tr)] = d
+        self._oldest_approach = np.inf
         for tr in self._tracks:
             if t_now - tr.approached_at > 1.0 or not tr.ahead:
                 continue
+            self._oldest_approach = min(self._oldest_approach, tr.approached_at)
             v = tr.speed
             d = provisional.get(id(tr), tr.dists[-1])
             at = t_pulse if id(tr) in provisional else tr.times[-1]
@@ -481,7 +540,7 @@ class BoundaryMonitor:
         if best is None:
             self._level = "clear"
             moving = any(abs(tr.closed_in(0.8)) >= self.approach_m for tr in self._tracks)
-            self._alert = Alert("clear", None, "opening" if moving else None, 0.0, None, None,
+            self._verdict = Alert("clear", None, "opening" if moving else None, 0.0, None, None,
                                 () if self._tracks else ("no_echo",))
         else:
             d, closing, ttc, tr, at = best
@@ -491,7 +550,7 @@ class BoundaryMonitor:
                        or ttc < self.caution_ttc_s * (1.1 if self._level != "clear" else 1.0))
             level = self._level = "stop" if stop else "caution" if caution else "clear"
             conf = float(np.clip(min(len(tr.dists), 10) / 10 * min(1.0, np.mean(tr.strengths) * 200), 0, 1))
-            self._alert = Alert(level, float(d), "closed", conf, float(closing), None if np.isinf(ttc) else float(ttc),
+            self._verdict = Alert(level, float(d), "closed", conf, float(closing), None if np.isinf(ttc) else float(ttc),
                                 (), float(at))
 
 

@@ -227,12 +227,12 @@ def parabolic_peaks(y: np.ndarray, i: np.ndarray) -> np.ndarray:
     """Peaks' positions to a fraction of a sample (a parabola through three samples; a peak at
     either end of ``y`` stays where it is)."""
     i = np.asarray(i)
-    if i.size <= 4:  # a few peaks (the headset's every pulse): plain floats beat a dozen array calls
+    if i.size <= 32:  # a few peaks (the headset's every pulse): plain floats beat a dozen array calls
+        last = len(y) - 1
         out = []
-        for k in i.tolist():
-            a, b, c = (float(y[k - 1]), float(y[k]), float(y[k + 1])) if 0 < k < len(y) - 1 else (0.0, 0.0, 0.0)
+        for k, (a, b, c) in zip(i.tolist(), y[np.clip(np.add.outer(i, (-1, 0, 1)), 0, last)].tolist()):
             den = a - 2 * b + c
-            out.append(k + 0.5 * (a - c) / den if den < 0 else float(k))
+            out.append(k + 0.5 * (a - c) / den if den < 0 and 0 < k < last else float(k))
         return np.array(out)
     inner = (i > 0) & (i < len(y) - 1)
     a, b, c = y[np.maximum(i - 1, 0)], y[i], y[np.minimum(i + 1, len(y) - 1)]
