@@ -129,17 +129,22 @@ class _Track:
         ``offsets`` (the distances of surfaces that stay put: floor, ceiling, side walls; a
         wall's echo by way of the ceiling nears like a point that far overhead) than as a
         surface straight ahead: sqrt(d^2 - a^2) is then the one that falls linearly."""
-        t = np.array(self.times)
-        keep = t >= t[-1] - span_s
-        if keep.sum() < 8 or not offsets:
+        t = np.fromiter(self.times, float, len(self.times))
+        first = int(np.searchsorted(t, t[-1] - span_s))
+        if len(t) - first < 8 or not offsets:
             return False
-        tt, d = t[keep] - t[-1], np.array(self.dists)[keep]
+        d = np.fromiter(self.dists, float, len(self.dists))[first:]
+        a = np.array([o for o in offsets if o < d.min() - 0.02])
+        if not len(a):
+            return False
+        tc = t[first:] - t[first:].mean()
 
-        def rms(x):
-            return float(np.sqrt(np.mean((x - np.polyval(np.polyfit(tt, x, 1), tt)) ** 2)))
+        def residual(x):  # mean square about each row's straight line in time
+            xc = x - x.mean(axis=-1, keepdims=True)
+            return np.maximum((xc * xc).mean(axis=-1) - (xc @ tc / len(tc)) ** 2 / (tc @ tc / len(tc)), 0.0)
 
-        frontal = rms(d)
-        return any(rms(np.sqrt(d ** 2 - a ** 2)) < 0.7 * frontal for a in offsets if a < d.min() - 0.02)
+        frontal = residual(d)
+        return bool(np.any(residual(np.sqrt(d ** 2 - a[:, None] ** 2)) < 0.49 * frontal))  # rms below 0.7 of it
 
     def closed_in(self, span_s: float) -> float:
         """How much nearer the surface came over the last ``span_s`` (0 until the track is that old)."""
@@ -158,18 +163,35 @@ class _Track:
         it cannot tell (a short track, a far surface: the minimum is then an extrapolation, and a
         head's bob hides the curvature). The longest of ``spans_s`` that tells answers (a track
         may have picked up another echo's history where the two crossed)."""
-        # One array of the fit's terms; each span's sums are a suffix's (some 15 points a fit).
-        times = np.fromiter(self.times, float, len(self.times))
-        tt = times - times[-1]
-        y = np.fromiter(self.dists, float, len(self.dists)) ** 2
-        t2 = tt * tt
-        terms = np.array([tt, t2, t2 * tt, t2 * t2, y, tt * y, t2 * y, y * y])
+        # One backward pass in plain floats over the last points (some 15 a span), keeping each
+        # span's sums as the pass reaches its first point.
+        t_last = self.times[-1]
+        sums = {}
+        acc = [0.0] * 9  # n, sum t, t^2, t^3, t^4, y, t y, t^2 y, y^2 (t from the last point, y = d^2)
+        bounds = sorted(spans_s)
+        for t, d in zip(reversed(self.times), reversed(self.dists)):
+            u = t - t_last
+            while bounds and t < t_last - bounds[0]:  # past the shortest open span's start
+                sums[bounds.pop(0)] = (tuple(acc), -prev_u)
+            if not bounds:
+                break
+            u2, y = u * u, d * d
+            acc[0] += 1.0
+            acc[1] += u
+            acc[2] += u2
+            acc[3] += u2 * u
+            acc[4] += u2 * u2
+            acc[5] += y
+            acc[6] += u * y
+            acc[7] += u2 * y
+            acc[8] += y * y
+            prev_u = u
+        for span_s in bounds:  # spans longer than the track
+            sums[span_s] = (tuple(acc), -prev_u)
         for span_s in spans_s:
-            first = int(np.searchsorted(times, times[-1] - span_s))
-            n = len(tt) - first
-            if -tt[first] < 0.9 * span_s or n < 8:
+            (n, s1, s2, s3, s4, b0, b1, b2, yy), reach = sums[span_s]
+            if reach < 0.9 * span_s or n < 8:
                 continue
-            s1, s2, s3, s4, b0, b1, b2, yy = terms[:, first:].sum(axis=1).tolist()
             # Least squares of y on (t^2, t, 1): the normal equations' matrix ((s4, s3, s2),
             # (s3, s2, s1), (s2, s1, n)) is symmetric: its cofactors over its determinant are its inverse.
             c00, c01, c02 = s2 * n - s1 * s1, -(s3 * n - s1 * s2), s3 * s1 - s2 * s2

@@ -230,9 +230,14 @@ def parabolic_peaks(y: np.ndarray, i: np.ndarray) -> np.ndarray:
     if i.size <= 32:  # a few peaks (the headset's every pulse): plain floats beat a dozen array calls
         last = len(y) - 1
         out = []
-        for k, (a, b, c) in zip(i.tolist(), y[np.clip(np.add.outer(i, (-1, 0, 1)), 0, last)].tolist()):
-            den = a - 2 * b + c
-            out.append(k + 0.5 * (a - c) / den if den < 0 and 0 < k < last else float(k))
+        for k in i.tolist():
+            if 0 < k < last:
+                a, b, c = y[k - 1:k + 2].tolist()
+                den = a - 2 * b + c
+                if den < 0:
+                    out.append(k + 0.5 * (a - c) / den)
+                    continue
+            out.append(float(k))
         return np.array(out)
     inner = (i > 0) & (i < len(y) - 1)
     a, b, c = y[np.maximum(i - 1, 0)], y[i], y[np.minimum(i + 1, len(y) - 1)]
