@@ -133,6 +133,19 @@ def test_a_fast_walk_into_glass_is_warned_in_time():
     assert 1.6 < alerts[-1].closing_speed_mps < 2.4
 
 
+def test_a_dropout_late_in_every_pulse_keeps_the_echoes_before_it(glass):
+    # 5 ms of zeros 25 ms after every pulse (beyond the echoes of the last 3.5 m): the echoes
+    # wholly heard before the damage still count (a damaged window used to be dropped whole).
+    x = glass.mic.copy()
+    period = int(0.04 * FS)
+    for e in range(0, len(x), period):
+        x[e + int(0.025 * FS):e + int(0.030 * FS)] = 0.0
+    _, alerts, ends = _run(glass, x)
+    assert any("dropout" in a.flags for a in alerts)
+    a, _, at = _first(alerts, ends, glass, ("caution", "stop"))
+    assert a is not None and at >= 0.5, at
+
+
 def test_no_echo_at_all_is_clear_and_says_so():
     mon = BoundaryMonitor(FS)
     rng = np.random.default_rng(0)

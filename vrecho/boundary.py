@@ -36,9 +36,11 @@ block in which its echo of the pulse still arriving is predicted to end (give or
 also analyses that pulse, so an echo that crosses the threshold raises the alert in the block in
 which that echo ends.
 
-Robustness: clipped samples are flagged (the timing survives clipping); runs of exact zeros
-(dropouts) and non-finite samples are flagged and their pulse skipped; any block size, changing
-from call to call; 44.1 or 48 kHz.
+Robustness: clipped samples are flagged (the timing survives clipping, and the clipped direct
+sound's distortion is kept out, see 1.); runs of exact zeros (dropouts) and non-finite samples
+are flagged, and a pulse's window ends where they begin (the echoes heard wholly before them
+count; none if they reach the direct sound); any block size, changing from call to call; 44.1
+or 48 kHz.
 
 ``surface``: "closed" for an echoing surface ahead, "opening" when the wearer moves and nothing
 ahead echoes. Glass, mirror and wall reflect a ranging chirp alike (their absorption differs by
@@ -297,7 +299,7 @@ class BoundaryMonitor:
         if step not in self._clipped_floors:
             from scipy.ndimage import maximum_filter1d
 
-            level = np.quantile(np.abs(self.probe), 1 - step / 20)
+            level = max(np.quantile(np.abs(self.probe), 1 - step / 20), 1e-3 * np.abs(self.probe).max())  # all: its signs
             m = len(self.probe)
             n = 4 * m
             x = np.zeros(n - m)
@@ -383,13 +385,14 @@ class BoundaryMonitor:
             if lo + size < len(x):
                 self._update()
 
-    def _samples(self, start: int, stop: int) -> tuple[np.ndarray, bool]:
+    def _samples(self, start: int, stop: int) -> tuple[np.ndarray, int]:
+        """The samples from ``start`` to ``stop`` and how many of them come before the first
+        damaged one (a dropout's or a NaN's)."""
         size = len(self._buf)
         a, b = start % size, (start % size) + (stop - start)
-        if b <= size:
-            return self._buf[a:b], bool(self._valid[a:b].all())
-        idx = np.arange(start, stop) % size  # across the ring's end
-        return self._buf[idx], bool(self._valid[idx].all())
+        idx = slice(a, b) if b <= size else np.arange(start, stop) % size  # across the ring's end
+        valid = self._valid[idx]
+        return self._buf[idx], len(valid) if valid.all() else int(np.argmin(valid))
 
     def _update(self) -> None:
         """Commit every pulse whose window is complete, then judge the current pulse from what has
@@ -437,10 +440,15 @@ class BoundaryMonitor:
 
     def _detect(self, k: int, stop: int):
         """Echo distances (m) and strengths of pulse ``k`` from its samples up to ``stop``, keeping
-        the echoes that have ended; None when the window is damaged."""
+        the echoes that have ended before any damage; None when damage reaches the direct sound."""
         e = k * self.period
-        x, ok = self._samples(e, min(stop, e + self.window))
-        if not ok or len(x) < len(self.probe) + 8:
+        x, good = self._samples(e, min(stop, e + self.window))
+        if good < len(x):  # damage ends the window: the echoes wholly heard before it count
+            direct = self.latency_max if self._direct_delay is None else self._direct_delay
+            if good < direct + 2 * len(self.probe):
+                return None  # (the direct sound must be whole: it is the reference)
+            x = x[:good]
+        if len(x) < len(self.probe) + 8:
             return None
         n = self._fft_sizes.get(len(x))
         if n is None:

@@ -20,7 +20,7 @@ import scipy.fft
 import scipy.signal
 
 from .errors import VrechoError
-from .signals import FS, check_fs
+from .signals import FS, check_fs, parabolic_peaks
 
 N_FFT = 2048
 HOP = 512
@@ -238,8 +238,6 @@ def echo_at(audio, emitted, depth_m: float, fs: int = FS, window_m: float = 0.03
     if lo >= hi:
         raise VrechoError(f"depth_m: {depth_m} m lies outside the 30 ms analysed")
     p = lo + int(np.argmax(h[lo:hi]))
-    a, b, cc = h[p - 1], h[p], h[min(p + 1, len(h) - 1)]
-    frac = 0.5 * (a - cc) / (a - 2 * b + cc) if (a - 2 * b + cc) < 0 else 0.0
-    path = c * (p + frac) / FS
-    level = 20 * np.log10(max(b, 1e-12) / max(h[direct], 1e-12)) + 20 * np.log10(path / MIC_ABOVE_EMITTER_M)
+    path = c * float(parabolic_peaks(h, (p,))[0]) / FS
+    level = 20 * np.log10(max(h[p], 1e-12) / max(h[direct], 1e-12)) + 20 * np.log10(path / MIC_ABOVE_EMITTER_M)
     return float(level), float(np.sqrt(max(path ** 2 - MIC_ABOVE_EMITTER_M ** 2, 0.0)) / 2)
