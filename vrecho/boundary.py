@@ -30,11 +30,13 @@ pulse:
    *stop* under ``stop_m``; an alert ends only ``hysteresis_m`` beyond its threshold (or when
    the surface stops approaching for a second).
 
-The alert is judged again whenever something it rests on changes (a pulse's window completes,
-a surface's approach grows a second old): while a surface in the way is near a threshold, the
-block in which its echo of the pulse still arriving is predicted to end (give or take 1.5 ms)
-also analyses that pulse, so an echo that crosses the threshold raises the alert in the block in
-which that echo ends.
+The alert is the gravest any surface in the way calls for (the soonest to contact among equals),
+judged again whenever something it rests on changes (a pulse's window completes, a surface's
+approach grows a second old): while a surface in the way, or one not yet known to pass by, is
+near a threshold, the block in which its echo of the pulse still arriving is predicted to end
+(give or take 1.5 ms) also analyses that pulse (an undecided surface is asked again with that
+echo), so an echo that crosses the threshold raises the alert in the block in which that echo
+ends.
 
 Robustness: clipped samples are flagged (the timing survives clipping, and the clipped direct
 sound's distortion is kept out, see 1.); runs of exact zeros (dropouts) and non-finite samples
@@ -147,6 +149,22 @@ class _Track:
 
         frontal = residual(d)
         return bool(np.any(residual(np.sqrt(d ** 2 - a[:, None] ** 2)) < 0.49 * frontal))  # rms below 0.7 of it
+
+    def ahead_with(self, t: float, d: float, miss_m: float, still: list[float]) -> bool:
+        """Whether the surface is in the way (:meth:`in_the_way`, not :meth:`explained_by` a
+        surface that stays put) with one more echo ``d`` at ``t``, the history left as it was."""
+        full = len(self.times) == self.times.maxlen
+        first = (self.times[0], self.dists[0]) if full else None
+        self.times.append(t)
+        self.dists.append(d)
+        try:
+            return bool(self.in_the_way(miss_m)) and not self.explained_by(still)
+        finally:
+            self.times.pop()
+            self.dists.pop()
+            if first:
+                self.times.appendleft(first[0])
+                self.dists.appendleft(first[1])
 
     def closed_in(self, span_s: float) -> float:
         """How much nearer the surface came over the last ``span_s`` (0 until the track is that old)."""
@@ -276,6 +294,7 @@ class BoundaryMonitor:
         self._direct_delay: float | None = None  # samples from emission to the direct peak (latency + s / c)
         self._alert = self._verdict = Alert()  # the alert returned; the last judgement behind it
         self._oldest_approach = np.inf  # the earliest approached_at among the surfaces judged
+        self._still: list[float] = []  # distances of the surfaces that stay put, at the last commit
         self._level = "clear"
         self._kernels: dict[int, np.ndarray] = {}
         self._clipped_floors: dict[int, np.ndarray] = {}
@@ -299,7 +318,8 @@ class BoundaryMonitor:
         if step not in self._clipped_floors:
             from scipy.ndimage import maximum_filter1d
 
-            level = max(np.quantile(np.abs(self.probe), 1 - step / 20), 1e-3 * np.abs(self.probe).max())  # all: its signs
+            peak = np.abs(self.probe).max()  # (clipped wholly: its signs)
+            level = max(np.quantile(np.abs(self.probe), 1 - step / 20), 1e-3 * peak)
             m = len(self.probe)
             n = 4 * m
             x = np.zeros(n - m)
@@ -424,15 +444,17 @@ class BoundaryMonitor:
         self._judged = self._now
 
     def _echo_ends(self, t: float) -> list[float]:
-        """For each surface in the way that may cross an alert threshold with the pulse emitted at
-        ``t`` (within 0.3 m of a distance threshold, or 0.5 s of the time-to-contact one): the
-        lag (samples from the emission) at which its echo will have wholly arrived."""
+        """For each surface in the way (or not yet known not to be) that may cross an alert
+        threshold with the pulse emitted at ``t`` (within 0.3 m of a distance threshold, or 0.5 s
+        of the time-to-contact one): the lag (samples from the emission) at which its echo will
+        have wholly arrived."""
         out = []
         for tr in self._tracks:
-            if tr.ahead and t - tr.approached_at <= 1.0:
-                d = tr.predict(t)
+            if t - tr.approached_at <= 1.0 and (tr.ahead or (tr.ahead is None and len(tr.times) >= 7)):
+                d = tr.predict(t)  # (an undecided track: one echo more may decide it)
                 closing = -(tr.speed or 0.0)
-                if d < self.caution_m + 0.3 or (closing > 0.05 and d / closing < self.caution_ttc_s + 0.5):
+                near = self.caution_m if tr.ahead else self.stop_m  # undecided: near the stop only
+                if d < near + 0.3 or (tr.ahead and closing > 0.05 and d / closing < self.caution_ttc_s + 0.5):
                     s = self.mic_offset_m
                     path = np.sqrt((2 * max(d, 0.0)) ** 2 + s ** 2) - s
                     out.append((self._direct_delay or 0.0) + path / SPEED_OF_SOUND * self.fs + len(self.probe))
@@ -532,7 +554,7 @@ class BoundaryMonitor:
                 tr.approached_at = t
             updated.append(tr)
         # Only a surface being approached can need an alert: the fits are for those.
-        still = [tr.d_hat for tr in self._tracks
+        still = self._still = [tr.d_hat for tr in self._tracks
                  if len(tr.times) >= 10 and tr.speed is not None and abs(tr.speed) < 0.25 and tr.d_hat >= self.miss_m]
         for tr in updated:
             tr.ahead = None
@@ -546,6 +568,17 @@ class BoundaryMonitor:
         if len(self._tracks) > 32:  # clutter: keep the nearest
             self._tracks = sorted(self._tracks, key=lambda tr: tr.dists[-1])[:32]
 
+    def _level_for(self, d: float, ttc: float) -> str:
+        """The alert a surface at ``d`` m, ``ttc`` s from contact calls for, with hysteresis
+        (an alert ends only ``hysteresis_m`` beyond its threshold)."""
+        h = self.hysteresis_m
+        if d < self.stop_m + (h if self._level == "stop" else 0.0):
+            return "stop"
+        if (d < self.caution_m + (h if self._level != "clear" else 0.0)
+                or ttc < self.caution_ttc_s * (1.1 if self._level != "clear" else 1.0)):
+            return "caution"
+        return "clear"
+
     def _judge(self, partial, current: int) -> None:
         t_now = self._now / self.fs
         t_pulse = current * self.period / self.fs
@@ -557,31 +590,34 @@ class BoundaryMonitor:
                     provisional[id(tr)] = d
         self._oldest_approach = np.inf
         for tr in self._tracks:
-            if t_now - tr.approached_at > 1.0 or not tr.ahead:
+            if t_now - tr.approached_at > 1.0 or tr.ahead is False:
                 continue
+            if tr.ahead is None and not (id(tr) in provisional
+                                         and tr.ahead_with(t_pulse, provisional[id(tr)], self.miss_m, self._still)):
+                continue  # not known to be in the way: asked again with the echo still arriving, if any
             self._oldest_approach = min(self._oldest_approach, tr.approached_at)
             v = tr.speed
             d = provisional.get(id(tr), tr.dists[-1])
             at = t_pulse if id(tr) in provisional else tr.times[-1]
             closing = -v if v is not None else 0.0
             ttc = d / closing if closing > 0.05 else np.inf
-            if best is None or (ttc, d) < (best[2], best[0]):
-                best = (d, closing, ttc, tr, at)
+            level = self._level_for(d, ttc)
+            if best is None or (-_RANK[level], ttc, d) < (-_RANK[best[5]], best[2], best[0]):  # gravest, then soonest
+                best = (d, closing, ttc, tr, at, level)
         if best is None:
             self._level = "clear"
             moving = any(abs(tr.closed_in(0.8)) >= self.approach_m for tr in self._tracks)
             self._verdict = Alert("clear", None, "opening" if moving else None, 0.0, None, None,
                                 () if self._tracks else ("no_echo",))
         else:
-            d, closing, ttc, tr, at = best
-            h = self.hysteresis_m
-            stop = d < self.stop_m + (h if self._level == "stop" else 0.0)
-            caution = (d < self.caution_m + (h if self._level != "clear" else 0.0)
-                       or ttc < self.caution_ttc_s * (1.1 if self._level != "clear" else 1.0))
-            level = self._level = "stop" if stop else "caution" if caution else "clear"
+            d, closing, ttc, tr, at, level = best
+            self._level = level
             conf = float(np.clip(min(len(tr.dists), 10) / 10 * min(1.0, np.mean(tr.strengths) * 200), 0, 1))
             self._verdict = Alert(level, float(d), "closed", conf, float(closing), None if np.isinf(ttc) else float(ttc),
                                 (), float(at))
+
+
+_RANK = {"clear": 0, "caution": 1, "stop": 2}
 
 
 def _merge(echoes, within_m: float):
