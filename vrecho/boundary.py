@@ -128,16 +128,24 @@ class _Track:
         self.dists.append(d)
         self.strengths.append(strength)
 
-    def explained_by(self, offsets: list[float], span_s: float = 0.6) -> bool:
+    def _history(self, extra=None):
+        """The track's times and distances, with one more point ``extra`` = (t, d) if given."""
+        if extra is None:
+            return self.times, self.dists
+        return [*self.times, extra[0]], [*self.dists, extra[1]]
+
+    def explained_by(self, offsets: list[float], span_s: float = 0.6, extra=None) -> bool:
         """Whether the track is better read as a second-order echo that passes by at one of
         ``offsets`` (the distances of surfaces that stay put: floor, ceiling, side walls; a
         wall's echo by way of the ceiling nears like a point that far overhead) than as a
-        surface straight ahead: sqrt(d^2 - a^2) is then the one that falls linearly."""
-        t = np.fromiter(self.times, float, len(self.times))
+        surface straight ahead: sqrt(d^2 - a^2) is then the one that falls linearly. ``extra``:
+        one more point (t, d) after the history."""
+        times, dists = self._history(extra)
+        t = np.fromiter(times, float, len(times))
         first = int(np.searchsorted(t, t[-1] - span_s))
         if len(t) - first < 8 or not offsets:
             return False
-        d = np.fromiter(self.dists, float, len(self.dists))[first:]
+        d = np.fromiter(dists, float, len(dists))[first:]
         a = np.array([o for o in offsets if o < d.min() - 0.02])
         if not len(a):
             return False
@@ -152,19 +160,8 @@ class _Track:
 
     def ahead_with(self, t: float, d: float, miss_m: float, still: list[float]) -> bool:
         """Whether the surface is in the way (:meth:`in_the_way`, not :meth:`explained_by` a
-        surface that stays put) with one more echo ``d`` at ``t``, the history left as it was."""
-        full = len(self.times) == self.times.maxlen
-        first = (self.times[0], self.dists[0]) if full else None
-        self.times.append(t)
-        self.dists.append(d)
-        try:
-            return bool(self.in_the_way(miss_m)) and not self.explained_by(still)
-        finally:
-            self.times.pop()
-            self.dists.pop()
-            if first:
-                self.times.appendleft(first[0])
-                self.dists.appendleft(first[1])
+        surface that stays put) with one more echo ``d`` at ``t``, the history left as it is."""
+        return bool(self.in_the_way(miss_m, extra=(t, d))) and not self.explained_by(still, extra=(t, d))
 
     def closed_in(self, span_s: float) -> float:
         """How much nearer the surface came over the last ``span_s`` (0 until the track is that old)."""
@@ -174,7 +171,7 @@ class _Track:
         k = max(bisect.bisect_right(t, t[-1] - span_s) - 1, 0)
         return float(self.dists[k] - self.dists[-1])
 
-    def in_the_way(self, miss_m: float, spans_s=(0.6, 0.45, 0.32)) -> bool | None:
+    def in_the_way(self, miss_m: float, spans_s=(0.6, 0.45, 0.32), extra=None) -> bool | None:
         """Whether the wearer will pass within ``miss_m`` of the surface (closest point of
         approach). A point at lateral offset ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, a
         quadratic in t (fitted to the last ``span_s``) whose minimum is a^2; a surface straight
@@ -182,14 +179,16 @@ class _Track:
         (and not far below 0, which no steady motion gives), False when above by two, None while
         it cannot tell (a short track, a far surface: the minimum is then an extrapolation, and a
         head's bob hides the curvature). The longest of ``spans_s`` that tells answers (a track
-        may have picked up another echo's history where the two crossed)."""
+        may have picked up another echo's history where the two crossed). ``extra``: one more
+        point (t, d) after the history."""
+        times, dists = self._history(extra)
         # One backward pass in plain floats over the last points (some 15 a span), keeping each
         # span's sums as the pass reaches its first point.
-        t_last = self.times[-1]
+        t_last = times[-1]
         sums = {}
         acc = [0.0] * 9  # n, sum t, t^2, t^3, t^4, y, t y, t^2 y, y^2 (t from the last point, y = d^2)
         bounds = sorted(spans_s)
-        for t, d in zip(reversed(self.times), reversed(self.dists)):
+        for t, d in zip(reversed(times), reversed(dists)):
             u = t - t_last
             while bounds and t < t_last - bounds[0]:  # past the shortest open span's start
                 sums[bounds.pop(0)] = (tuple(acc), -prev_u)
@@ -466,8 +465,8 @@ class BoundaryMonitor:
         e = k * self.period
         x, good = self._samples(e, min(stop, e + self.window))
         if good < len(x):  # damage ends the window: the echoes wholly heard before it count
-            direct = self.latency_max if self._direct_delay is None else self._direct_delay
-            if good < direct + 2 * len(self.probe):
+            reference = self.latency_max if self._direct_delay is None else self._direct_delay
+            if good < reference + 2 * len(self.probe):
                 return None  # (the direct sound must be whole: it is the reference)
             x = x[:good]
         if len(x) < len(self.probe) + 8:
@@ -490,8 +489,7 @@ class BoundaryMonitor:
         ref = self._direct_delay
         peak_direct = env[d0]
         sidelobe = self._sidelobe
-        direct_part = np.abs(x[d0:d0 + len(self.probe)])
-        rail = np.count_nonzero(direct_part >= direct_part.max(initial=0.0) * (1 - 1e-6))
+        rail = np.count_nonzero(_at_rail(x[d0:d0 + len(self.probe)]))
         if rail >= 3:  # the direct sound clipped: its distortion rises above the sidelobes, near it
             sidelobe = self._clipped_sidelobe(rail / len(self.probe))
         lo = int(ref + 2 * self.min_range_m / SPEED_OF_SOUND * self.fs)
@@ -646,14 +644,17 @@ def _zero_runs(x: np.ndarray, min_len: int) -> np.ndarray:
     return out
 
 
+def _at_rail(x: np.ndarray) -> np.ndarray:
+    """The samples at ``x``'s largest magnitude (none if it is silent)."""
+    a = np.abs(x)
+    m = float(a.max(initial=0.0))
+    return a >= m * (1 - 1e-6) if m > 0.0 else np.zeros(len(a), bool)
+
+
 def _clipped(x: np.ndarray) -> bool:
     """Flat tops: three or more consecutive samples at the block's largest magnitude (a clipping
     converter or limiter holds its rail; a real signal does not)."""
-    a = np.abs(x)
-    m = float(a.max(initial=0.0))
-    if m == 0.0:
-        return False
-    top = a >= m * (1 - 1e-6)
+    top = _at_rail(x)
     if np.count_nonzero(top) < 3:  # the usual block: one loudest sample
         return False
     return bool(np.any(top[2:] & top[1:-1] & top[:-2]))
