@@ -32,39 +32,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-KINDS = ("speech", "music", "hum", "protocol")
-PROTOCOL_SOUNDS = ("clap", "voice", "whistle", "chirp", "white_noise", "pink_noise", "tone_1000")
 SLOW_PRA = ("CSSM", "WAVES", "TOPS")
 N_POSES, SEGMENT_S = 8, 1.5
-
-
-def random_room(rng, n_sources: int, rt60: float):
-    from localization.capture import FS, AmbientSource, Shoebox
-    from localization.sounds import ambient_sound
-    from vrecho.scene import DevicePose
-
-    dims = (rng.uniform(3.5, 7), rng.uniform(3, 6), rng.uniform(2.4, 3.0))
-    c = np.array(dims[:2]) / 2
-    rx, ry = c[0] - rng.uniform(0.9, 1.3), c[1] - rng.uniform(0.9, 1.3)
-    a0, span = rng.uniform(0, 2 * np.pi), rng.uniform(np.pi, 1.6 * np.pi)
-    poses = []
-    for t in np.linspace(0, 1, N_POSES):
-        a = a0 + span * t
-        tangent = np.array([-rx * np.sin(a), ry * np.cos(a)])
-        tangent /= np.linalg.norm(tangent)
-        yaw = rng.uniform(-0.8, 0.8)
-        forward = [np.cos(yaw) * tangent[0] - np.sin(yaw) * tangent[1],
-                   np.sin(yaw) * tangent[0] + np.cos(yaw) * tangent[1], rng.uniform(-0.15, 0.1)]
-        poses.append(DevicePose([c[0] + rx * np.cos(a), c[1] + ry * np.sin(a), rng.uniform(1.45, 1.7)], forward, [0, 0, 1]))
-    sources = []
-    while len(sources) < n_sources:
-        q = np.array([rng.uniform(0.4, dims[0] - 0.4), rng.uniform(0.4, dims[1] - 0.4), rng.uniform(0.3, 2.0)])
-        if min(np.linalg.norm(q - p.emitter) for p in poses) < 1.0 or any(np.linalg.norm(q - s.position) < 1.0 for s in sources):
-            continue
-        kind = KINDS[int(rng.integers(len(KINDS)))]
-        sound = PROTOCOL_SOUNDS[int(rng.integers(len(PROTOCOL_SOUNDS)))] if kind == "protocol" else kind
-        sources.append(AmbientSource(q, ambient_sound(sound, N_POSES * SEGMENT_S, FS, rng), sound))
-    return Shoebox(dims, rt60), sources, poses
 
 
 def _angles(true_dirs: np.ndarray, est_dirs: np.ndarray) -> np.ndarray:
@@ -92,7 +61,7 @@ def one_room(args):
     from scipy.signal import resample_poly
 
     from localization import doa, locate, separate
-    from localization.capture import simulate_walk_capture
+    from localization.capture import random_walk, simulate_walk_capture
     from localization.locate import PRA_METHODS
     from localization.separate import METHODS
     from vrecho.classifier import load_classifier
@@ -101,7 +70,7 @@ def one_room(args):
     rng = np.random.default_rng(seed + index)
     n_src = 2 + index % 2
     rt60 = 0.2 + 0.6 * index / max(1, n_rooms - 1)
-    room, sources, poses = random_room(rng, n_src, rt60)
+    room, sources, poses = random_walk(rng, n_src, rt60, N_POSES, SEGMENT_S)
     sim = simulate_walk_capture(room, sources, poses, rng, segment_s=SEGMENT_S)
     true = np.array([s.position for s in sources])
     row = {"room": index, "rt60_s": rt60, "n_sources": n_src, "sounds": [s.name for s in sources], "doa": {}, "time_s": {}}

@@ -30,14 +30,14 @@ def main():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from bench_localization import SEGMENT_S, random_room
+    from bench_localization import N_POSES, SEGMENT_S
     from localization import locate
-    from localization.capture import simulate_walk_capture
+    from localization.capture import random_walk, simulate_walk_capture
     from localization.locate import _grid, _Votes
 
     rng = np.random.default_rng(a.seed + a.room)
     n_src = 2 + a.room % 2
-    room, sources, poses = random_room(rng, n_src, 0.2 + 0.6 * a.room / 49)
+    room, sources, poses = random_walk(rng, n_src, 0.2 + 0.6 * a.room / 49, N_POSES, SEGMENT_S)
     sim = simulate_walk_capture(room, sources, poses, rng, segment_s=SEGMENT_S)
     found = locate(sim.captures, bounds=((0, 0, 0), room.dims))
     votes = _Votes(sim.captures)

@@ -7,7 +7,9 @@
 - :func:`locate` (locate.py): world positions from all captures at once; :func:`doa`:
   pyroomacoustics' direction finders on one capture.
 - :func:`separate` (separate.py): pyroomacoustics' AuxIVA, ILRMA, FastMNMF2, a single-channel
-  NMF, and vrecho's separation informed by the positions.
+  NMF, and vrecho's separation informed by the positions: masknet.py's network gives each
+  time-frequency bin's share of each located source (weights shipped in ``assets/``), a
+  multichannel Wiener filter the sources' images.
 - :func:`place_sources`: both, giving :class:`PlacedSource` for :mod:`usd_export`.
 """
 

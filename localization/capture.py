@@ -224,3 +224,42 @@ def hear_scene(scene: Scene, rng: np.random.Generator, n_poses: int = 8, segment
     sources = [AmbientSource(np.asarray(s.position, float), ambient_sound(s.sound, duration, fs, rng) * 10 ** (s.gain_db / 20),
                              f"{s.sound}_{k}") for k, s in enumerate(scene.sources)]
     return simulate_walk_capture(scene, sources, poses, rng, array, fs, segment_s, cache=cache)
+
+
+AMBIENT_KINDS = ("speech", "music", "hum", "protocol")
+PROTOCOL_SOUNDS = ("clap", "voice", "whistle", "chirp", "white_noise", "pink_noise", "tone_1000")
+"""The PROTOCOL.md sounds a random room's source may repeat."""
+
+
+def random_walk(rng: np.random.Generator, n_sources: int, rt60_s: float, n_poses: int = 8,
+                segment_s: float = 1.5) -> tuple[Shoebox, list[AmbientSource], list[DevicePose]]:
+    """A random shoebox room 3.5-7 x 3-6 x 2.4-3 m of reverberation time ``rt60_s``, a walk of
+    ``n_poses`` headset poses along an arc through it (head turned up to 46 degrees from the
+    path, 1.45 to 1.7 m high) and ``n_sources`` sources at least 1 m apart and 1 m from the walk,
+    each playing speech, music, appliance hum or one of PROTOCOL.md's sounds repeated, long
+    enough for ``n_poses`` captures of ``segment_s``: the benchmark's rooms and the mask
+    network's training rooms (different seeds)."""
+    from .sounds import ambient_sound
+
+    dims = (rng.uniform(3.5, 7), rng.uniform(3, 6), rng.uniform(2.4, 3.0))
+    c = np.array(dims[:2]) / 2
+    rx, ry = c[0] - rng.uniform(0.9, 1.3), c[1] - rng.uniform(0.9, 1.3)
+    a0, span = rng.uniform(0, 2 * np.pi), rng.uniform(np.pi, 1.6 * np.pi)
+    poses = []
+    for t in np.linspace(0, 1, n_poses):
+        a = a0 + span * t
+        tangent = np.array([-rx * np.sin(a), ry * np.cos(a)])
+        tangent /= np.linalg.norm(tangent)
+        yaw = rng.uniform(-0.8, 0.8)
+        forward = [np.cos(yaw) * tangent[0] - np.sin(yaw) * tangent[1],
+                   np.sin(yaw) * tangent[0] + np.cos(yaw) * tangent[1], rng.uniform(-0.15, 0.1)]
+        poses.append(DevicePose([c[0] + rx * np.cos(a), c[1] + ry * np.sin(a), rng.uniform(1.45, 1.7)], forward, [0, 0, 1]))
+    sources = []
+    while len(sources) < n_sources:
+        q = np.array([rng.uniform(0.4, dims[0] - 0.4), rng.uniform(0.4, dims[1] - 0.4), rng.uniform(0.3, 2.0)])
+        if min(np.linalg.norm(q - p.emitter) for p in poses) < 1.0 or any(np.linalg.norm(q - s.position) < 1.0 for s in sources):
+            continue
+        kind = AMBIENT_KINDS[int(rng.integers(len(AMBIENT_KINDS)))]
+        sound = PROTOCOL_SOUNDS[int(rng.integers(len(PROTOCOL_SOUNDS)))] if kind == "protocol" else kind
+        sources.append(AmbientSource(q, ambient_sound(sound, n_poses * segment_s, FS, rng), sound))
+    return Shoebox(dims, rt60_s), sources, poses

@@ -9,12 +9,13 @@ Methods:
   components grouped into sources by the similarity of their activations, Wiener masks.
 - ``informed`` (vrecho's, needs ``positions``): what vrecho knows goes in. The sources'
   positions (from :func:`localization.locate`) give each frequency's near-field steering
-  vectors; each time-frequency bin's coherence with them starts a complex angular central
-  Gaussian mixture per frequency (so source k is the same source at every frequency: no
-  permutation problem), whose posteriors are each bin's source shares; each source's spatial
-  covariance is estimated from its shares, and the multichannel Wiener filter R_k R_x^-1 gives
-  its image at microphone 0. The filter keeps what the steering model misses (reverberation),
-  where a beamformer aimed by geometry alone would not.
+  vectors; :mod:`localization.masknet`, a small network trained on simulated walks, turns them
+  and microphone 0's spectrogram into each time-frequency bin's share of each source (so
+  source k is the same source at every frequency: no permutation problem). Each source's
+  spatial covariance is estimated from its shares, the multichannel Wiener filter R_k R_x^-1
+  gives its image at microphone 0 (the filter keeps what the steering model misses:
+  reverberation), and the share's square root, bin by bin, takes out what a time-invariant
+  filter cannot. Runs at 16 kHz (a capture at another rate is resampled to it and back).
 
 Every method returns an array (k, samples), the capture's length, in the order of
 ``positions`` for ``informed``.
@@ -32,8 +33,6 @@ from .capture import Capture
 METHODS: tuple[str, ...] = ("auxiva", "ilrma", "fastmnmf", "nmf", "informed")
 NFFT = 2048
 """STFT length for blind separation (128 ms at 16 kHz: about the reverberation times of rooms)."""
-INFORMED_NFFT = 512
-"""STFT length for informed separation: more frames for its covariances in a short capture."""
 
 
 def _stft(audio: np.ndarray, nfft: int = NFFT) -> np.ndarray:
@@ -58,7 +57,8 @@ def _istft(Y: np.ndarray, n: int, nfft: int = NFFT) -> np.ndarray:
 
 def separate(capture: Capture, n_sources: int, method: str = "informed", positions=None,
              n_iter: int | None = None) -> np.ndarray:
-    """Separate ``n_sources`` sources from ``capture`` (see the module's docstring)."""
+    """Separate ``n_sources`` sources from ``capture`` (see the module's docstring); ``n_iter``:
+    the iterations of the blind methods and NMF (informed separation has none)."""
     if not isinstance(capture, Capture):
         raise VrechoError(f"capture: expected a localization.Capture, got {type(capture).__name__}")
     if method not in METHODS:
@@ -79,7 +79,7 @@ def separate(capture: Capture, n_sources: int, method: str = "informed", positio
     if method == "nmf":
         return _nmf(capture.audio[0], n_sources, n_iter or 200)
     if method == "informed":
-        return _istft(_informed(_stft(capture.audio, INFORMED_NFFT), capture, positions, n_iter or 30), n, INFORMED_NFFT)
+        return _informed(capture, positions)
     import pyroomacoustics as pra
 
     X = _stft(capture.audio)
@@ -103,42 +103,33 @@ def steering(capture: Capture, positions: np.ndarray, freqs: np.ndarray) -> np.n
     return (dist[:1] / dist)[None] * np.exp(-2j * np.pi * freqs[:, None, None] * rel[None] / SPEED_OF_SOUND)
 
 
-def _informed(X: np.ndarray, capture: Capture, positions: np.ndarray, n_iter: int) -> np.ndarray:
-    freqs = np.fft.rfftfreq(INFORMED_NFFT, 1 / capture.fs)
-    share = _cacgmm(X, steering(capture, positions, freqs), n_iter, sharpness=4.0)
-    # Each source's spatial covariance from its shares; the multichannel Wiener filter
-    # R_k R_x^-1 (R_x the measured covariance, so the microphones' noise is in it).
+def _informed(capture: Capture, positions: np.ndarray) -> np.ndarray:
+    """(k, samples) at the capture's rate: the mask network's shares (at 16 kHz) weight each
+    source's spatial covariance; the multichannel Wiener filter R_k R_x^-1 (R_x the measured
+    covariance, so the microphones' noise is in it) gives its image at microphone 0, and the
+    square root of its share, bin by bin, takes out what the time-invariant filter let through."""
+    from scipy.signal import resample_poly
+
+    from .masknet import FS, NFFT, source_masks
+
+    n = capture.audio.shape[1]
+    g = np.gcd(capture.fs, FS)
+    audio = capture.audio if capture.fs == FS else resample_poly(capture.audio, FS // g, capture.fs // g, axis=1)
+    X = _stft(audio, NFFT)
+    share = source_masks(X, steering(capture, positions, np.fft.rfftfreq(NFFT, 1 / FS)))
     n_frames, _, m = X.shape
     Rx = np.einsum("tfm,tfn->fmn", X, np.conj(X)) / n_frames
     iRx = np.linalg.inv(Rx + 1e-9 * np.trace(Rx, axis1=-2, axis2=-1).real.mean() * np.eye(m))
     out = np.zeros(share.shape, dtype=complex)
     for k in range(share.shape[-1]):
-        Rk = np.einsum("tf,tfm,tfn->fmn", share[..., k], X, np.conj(X)) / n_frames
-        out[..., k] = np.einsum("fn,tfn->tf", (Rk @ iRx)[:, 0], X)
-    return out
-
-
-def _cacgmm(X: np.ndarray, A: np.ndarray, n_iter: int, sharpness: float = 2.0) -> np.ndarray:
-    """Each bin's source shares (T, F, K): a complex angular central Gaussian mixture per
-    frequency (Ito, Araki and Nakatani 2016) over the bins' normalised vectors, started from
-    their coherence with the steering vectors ``A`` (F, M, K), so that source k is the same
-    source at every frequency."""
-    m = X.shape[-1]
-    Z = X.transpose(1, 0, 2)
-    Z = Z / (np.linalg.norm(Z, axis=-1, keepdims=True) + 1e-20)  # (F, T, M)
-    An = A / np.linalg.norm(A, axis=1, keepdims=True)
-    g = np.abs(np.einsum("fmk,ftm->ftk", np.conj(An), Z)) ** (2 * sharpness * m)
-    g /= g.sum(-1, keepdims=True) + 1e-20
-    quad = np.ones(g.shape)
-    for _ in range(n_iter):
-        B = np.einsum("ftk,ftm,ftn->fkmn", g / np.maximum(quad, 1e-10), Z, np.conj(Z))
-        B = m * B / np.maximum(np.trace(B, axis1=-2, axis2=-1).real, 1e-30)[..., None, None] + 1e-4 * np.eye(m)
-        quad = np.einsum("ftm,fkmn,ftn->ftk", np.conj(Z), np.linalg.inv(B), Z).real
-        ll = (np.log(g.mean(axis=1) + 1e-20)[:, None] - np.linalg.slogdet(B)[1][:, None]
-              - m * np.log(np.maximum(quad, 1e-10)))
-        g = np.exp(ll - ll.max(axis=-1, keepdims=True))
-        g /= g.sum(-1, keepdims=True)
-    return g.transpose(1, 0, 2)
+        Rk = np.einsum("tf,tfm,tfn->fmn", share[..., k] ** 2, X, np.conj(X)) / n_frames
+        out[..., k] = np.einsum("fn,tfn->tf", (Rk @ iRx)[:, 0], X) * np.sqrt(share[..., k])
+    y = _istft(out, audio.shape[1], NFFT)
+    if capture.fs != FS:
+        y = resample_poly(y, capture.fs // g, FS // g, axis=1)
+    z = np.zeros((len(y), n))
+    z[:, :min(n, y.shape[1])] = y[:, :n]
+    return z
 
 
 def _nmf(x: np.ndarray, k: int, n_iter: int, per_source: int = 8, nfft: int = 1024) -> np.ndarray:

@@ -67,6 +67,46 @@ def test_both_sources_placed_and_separated(two_sources, tmp_path):
     assert np.allclose(t, [est[0][0], est[0][2], -est[0][1]], atol=1e-3)  # Y up
 
 
+def test_informed_at_another_rate(two_sources):
+    """A 48 kHz capture is separated at the mask network's 16 kHz and comes back at 48 kHz."""
+    from scipy.signal import resample_poly
+
+    from localization import Capture, separate
+
+    _, sim = two_sources
+    cap = sim.captures[4]
+    hi = Capture(resample_poly(cap.audio, 3, 1, axis=1), 48000, cap.mics)
+    y = separate(hi, 2, "informed", positions=np.array([s.position for s in sim.sources]))
+    assert y.shape == (2, hi.audio.shape[1]) and np.all(np.isfinite(y))
+    assert _sir_gain(resample_poly(sim.images[4, :, 0], 3, 1, axis=1), y, hi.audio[0]) > 2.0
+
+
+def test_mask_network(two_sources, tmp_path):
+    """Shares from 0 to 1 per bin and source, each source's larger where it is louder; one source
+    owns every bin; a tiny training run writes weights the shipped network's shape."""
+    import torch
+
+    from localization.masknet import FS, NFFT, WEIGHTS, source_masks, train
+    from localization.separate import _stft, steering
+
+    _, sim = two_sources
+    cap = sim.captures[4]
+    X = _stft(cap.audio, NFFT)
+    A = steering(cap, np.array([s.position for s in sim.sources]), np.fft.rfftfreq(NFFT, 1 / FS))
+    share = source_masks(X, A)
+    assert share.shape == X.shape[:2] + (2,) and share.min() >= 0 and share.max() <= 1
+    power = np.stack([np.abs(_stft(im[:1], NFFT)[..., 0]) ** 2 for im in sim.images[4]], axis=-1)
+    louder = power[..., 0] > 10 * power[..., 1]
+    quieter = power[..., 1] > 10 * power[..., 0]
+    assert share[..., 0][louder].mean() > share[..., 0][quieter].mean() + 0.3
+    assert np.all(source_masks(X, A[..., :1]) == 1)
+    out = tmp_path / "m.pt"
+    history = train(out, rooms=1, epochs=1, jobs=1, progress=False)
+    assert len(history) == 1 and np.isfinite(history[0])
+    trained, shipped = torch.load(out), torch.load(WEIGHTS)
+    assert {k: v.shape for k, v in trained.items()} == {k: v.shape for k, v in shipped.items()}
+
+
 @pytest.mark.parametrize("method", ["auxiva", "nmf"])
 def test_blind_methods_separate(two_sources, method):
     from localization import separate

@@ -1,0 +1,1 @@
+"""Weights shipped with localization: masknet.pt, informed separation's mask network."""
