@@ -32,8 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-FS = 16_000
-"""The network's sample rate (captures at other rates are resampled to it)."""
+from .capture import FS  # the network's sample rate: captures at other rates are resampled to it
+
 NFFT = 512
 WEIGHTS = Path(__file__).resolve().parent / "assets" / "masknet.pt"
 SEED = 20_000
@@ -41,8 +41,9 @@ SEED = 20_000
 
 
 def features(X: np.ndarray, A: np.ndarray) -> np.ndarray:
-    """X (T, F, M) a capture's STFT, A (F, M, K) the sources' steering vectors: the network's
-    input for each source as the target, (K, 5, F, T) float32 (see the module's docstring)."""
+    """X (T, F, M) a capture's STFT, A (F, M, K) the steering vectors of K >= 2 sources: the
+    network's input for each source as the target, (K, 5, F, T) float32 (see the module's
+    docstring; one source owns every bin, :func:`source_masks` needs no network for it)."""
     T, F, M = X.shape
     K = A.shape[-1]
     An = A / np.linalg.norm(A, axis=1, keepdims=True)
@@ -61,9 +62,9 @@ def features(X: np.ndarray, A: np.ndarray) -> np.ndarray:
         others = [j for j in range(K) if j != k]
         out[k, 0] = power
         out[k, 1] = coherence[k]
-        out[k, 2] = coherence[others].max(axis=0) if others else 0.0
+        out[k, 2] = coherence[others].max(axis=0)
         out[k, 3] = beams[k]
-        out[k, 4] = beams[others].max(axis=0) if others else power.min()
+        out[k, 4] = beams[others].max(axis=0)
     return out
 
 
@@ -129,7 +130,7 @@ def source_masks(X: np.ndarray, A: np.ndarray) -> np.ndarray:
 def _examples(args):
     """Training examples from the rooms ``share::jobs`` (one augmentation stream per share)."""
     share, jobs, n_rooms, seed = args
-    from .capture import Capture, random_walk, simulate_walk_capture
+    from .capture import random_walk, simulate_walk_capture
     from .separate import _stft, steering
 
     rng_aug = np.random.default_rng(share)
@@ -149,13 +150,14 @@ def _examples(args):
             mix = images.sum(axis=0) + noise
             positions = true + rng_aug.normal(0, 0.12, true.shape)
             X = _stft(mix, NFFT)
-            f = features(X, steering(Capture(mix, FS, cap.mics), positions, freqs))
+            f = features(X, steering(cap, positions, freqs))  # the steering reads the microphones only
             S = np.stack([_stft(im[:1], NFFT)[..., 0] for im in images])
             X0 = X[..., 0]
             psa = np.clip((S * np.conj(X0)[None]).real / (np.abs(X0)[None] + 1e-12), 0, np.abs(X0)[None])
+            mag = np.abs(X0).T.astype(np.float32)
             for k in range(n_src):
                 feats.append(f[k].astype(np.float16))
-                mags.append(np.abs(X0).T.astype(np.float32))
+                mags.append(mag)
                 targets.append(psa[k].T.astype(np.float32))
     return np.array(feats), np.array(mags), np.array(targets)
 

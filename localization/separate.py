@@ -110,13 +110,14 @@ def _informed(capture: Capture, positions: np.ndarray) -> np.ndarray:
     square root of its share, bin by bin, takes out what the time-invariant filter let through."""
     from scipy.signal import resample_poly
 
-    from .masknet import FS, NFFT, source_masks
+    from . import masknet
 
+    fs, nfft = masknet.FS, masknet.NFFT
     n = capture.audio.shape[1]
-    g = np.gcd(capture.fs, FS)
-    audio = capture.audio if capture.fs == FS else resample_poly(capture.audio, FS // g, capture.fs // g, axis=1)
-    X = _stft(audio, NFFT)
-    share = source_masks(X, steering(capture, positions, np.fft.rfftfreq(NFFT, 1 / FS)))
+    g = np.gcd(capture.fs, fs)
+    audio = capture.audio if capture.fs == fs else resample_poly(capture.audio, fs // g, capture.fs // g, axis=1)
+    X = _stft(audio, nfft)
+    share = masknet.source_masks(X, steering(capture, positions, np.fft.rfftfreq(nfft, 1 / fs)))
     n_frames, _, m = X.shape
     Rx = np.einsum("tfm,tfn->fmn", X, np.conj(X)) / n_frames
     iRx = np.linalg.inv(Rx + 1e-9 * np.trace(Rx, axis1=-2, axis2=-1).real.mean() * np.eye(m))
@@ -124,12 +125,10 @@ def _informed(capture: Capture, positions: np.ndarray) -> np.ndarray:
     for k in range(share.shape[-1]):
         Rk = np.einsum("tf,tfm,tfn->fmn", share[..., k] ** 2, X, np.conj(X)) / n_frames
         out[..., k] = np.einsum("fn,tfn->tf", (Rk @ iRx)[:, 0], X) * np.sqrt(share[..., k])
-    y = _istft(out, audio.shape[1], NFFT)
-    if capture.fs != FS:
-        y = resample_poly(y, capture.fs // g, FS // g, axis=1)
-    z = np.zeros((len(y), n))
-    z[:, :min(n, y.shape[1])] = y[:, :n]
-    return z
+    if capture.fs == fs:
+        return _istft(out, n, nfft)
+    y = resample_poly(_istft(out, audio.shape[1], nfft), capture.fs // g, fs // g, axis=1)  # back to the capture's rate
+    return np.pad(y[:, :n], ((0, 0), (0, max(0, n - y.shape[1]))))
 
 
 def _nmf(x: np.ndarray, k: int, n_iter: int, per_source: int = 8, nfft: int = 1024) -> np.ndarray:
