@@ -1,17 +1,19 @@
 #!/usr/bin/env bash
 # Set vrecho up on a fresh Debian machine: system libraries, PyTorch's CPU build, the package.
 #   ./install.sh          everything needed to run vrecho
-#   ./install.sh --test   and what the tests need
+#   ./install.sh --test   and what the tests need (pytest, fast-bss-eval, Debian's chromium)
 set -euo pipefail
 cd "$(dirname "$0")"
 extras=""
 [ "${1:-}" = "--test" ] && extras="[test]"
 sudo=""; [ "$(id -u)" = 0 ] || sudo="sudo"
 if command -v apt-get >/dev/null; then
-  # open3d's wheels need these (NOTES.md); soundfile needs libsndfile.
+  # open3d's wheels need these (NOTES.md); soundfile needs libsndfile. The tests open the demo's
+  # walkthrough in a real headless Chromium (vrecho demo also screenshots it when one is there).
+  browser=""; [ -n "$extras" ] && browser="chromium"
   $sudo apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends \
-    libusb-1.0-0 libgl1 libegl1 libx11-6 libudev1 libgomp1 libsndfile1 >/dev/null
+    libusb-1.0-0 libgl1 libegl1 libx11-6 libudev1 libgomp1 libsndfile1 $browser >/dev/null
 fi
 # torch first and pinned exactly: it takes the CPU build that lies on these machines; a loose
 # requirement would pull the registry's newest CUDA build (several GB).

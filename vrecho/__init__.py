@@ -7,8 +7,10 @@ is an opening, a pane of glass or a mirror, and how far away it is. Modules, one
 ``features`` (log-mel and echo features), ``data`` (datasets), ``models`` (EchoCNN and baselines),
 ``train`` (targets, losses, the training loop), ``evaluate`` (the benchmark harness and tables),
 ``classifier`` (``load_classifier``: shipped weights, ``predict``), ``reconstruct`` (the camera's
-scan and, to come, its repair), ``listen`` (what the device
-hears), ``cli`` (the ``vrecho`` command).
+scan and its repair), ``scan_metrics`` (a repair against the truth), ``boundary`` (the headset
+call) and ``walks`` (its simulated walks), ``capture`` and ``colmap`` (real captures), ``listen``
+(what the device hears in front of each surface), ``cli`` (the ``vrecho`` command; ``demo``
+runs the top-level :mod:`demo` package).
 """
 
 from .errors import VrechoError

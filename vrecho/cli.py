@@ -132,9 +132,10 @@ def _capture(args) -> int:
 
 
 def _demo(args) -> int:
-    from .listen import run_demo
+    import demo
 
-    run_demo(args.out, scene_path=args.scene, quiet=args.quiet)
+    demo.run(args.out, args.scene, args.html, browser=not args.no_browser, seed=args.seed, serve=args.serve,
+             progress=not args.quiet)
     return 0
 
 
@@ -245,12 +246,20 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--quiet", action="store_true", help="no progress bars")
     c.set_defaults(func=_capture)
 
-    d = sub.add_parser("demo", help="run vrecho on its built-in living room",
-                       description="Simulate the built-in scene (or --scene FILE): what the device hears in "
-                                   "front of each surface, against the truth; writes recordings and figures.")
+    d = sub.add_parser("demo", help="the whole run on the built-in living room, as a meshcat walkthrough",
+                       description="Simulate the built-in scene (or --scene FILE) and run all of vrecho on it: the "
+                                   "phone's scan and its repair with EchoCNN, the sources heard, separated and placed, "
+                                   "the headset call on walks toward each surface, the USD export; print each decision "
+                                   "against the truth, write figures and the walkthrough page, and open it.")
     d.add_argument("--out", type=Path, default=Path("vrecho-out"), help="output folder (default: ./vrecho-out)")
+    d.add_argument("--html", type=Path, default=None,
+                   help="the self-contained walkthrough page (default: OUT/walkthrough.html)")
+    d.add_argument("--no-browser", action="store_true", help="do not open the walkthrough in a browser")
+    d.add_argument("--serve", action="store_true",
+                   help="also keep the walkthrough on a live meshcat server (its address printed) until Ctrl-C")
     d.add_argument("--scene", type=Path, default=None, help="a scene JSON file instead of the built-in one")
-    d.add_argument("--quiet", action="store_true", help="no progress bar")
+    d.add_argument("--seed", type=int, default=0, help="seed of the simulated recordings (default: 0)")
+    d.add_argument("--quiet", action="store_true", help="no progress bars or step lines (the table is printed)")
     d.set_defaults(func=_demo)
     return parser
 

@@ -1,8 +1,8 @@
 """What the device hears in front of each surface of a scene: simulated frames with vrecho's
 probe, the echo read back from them by deconvolution, and the truth beside it.
 
-This is what ``vrecho demo`` runs until the full pipeline (repair, export, walkthrough) lands;
-EchoCNN's answers (the shipped weights) stand beside the truth.
+``vrecho demo`` (:mod:`demo`) writes its figure (the surfaces' echoes) and its table (EchoCNN's
+answers, the shipped weights, beside the truth) as one step of the whole run.
 """
 
 from __future__ import annotations
@@ -14,8 +14,7 @@ import numpy as np
 
 from .acoustics import device_direct_amplitude, device_impulse_response, echo_delay_s, record_pulse
 from .features import echo_response, logmel
-from .io import ensure_writable_dir
-from .scene import Scene, builtin_scene, load_scene
+from .scene import Scene
 from .signals import FS, emitted_sound, probe
 
 ECHO_WINDOW_S = 0.3e-3
@@ -121,25 +120,3 @@ def figure(scene: Scene, observations: list[Observation], path: Path) -> Path:
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
-
-
-def run_demo(out: str | Path, scene_path: str | Path | None = None, quiet: bool = False) -> list[Observation]:
-    """Simulate a scene (the built-in living room by default), print what the device hears in front
-    of each surface against the truth, and write the recordings (WAV) and a figure to ``out``."""
-    import soundfile as sf
-
-    scene = builtin_scene() if scene_path is None else load_scene(scene_path)
-    out = ensure_writable_dir(out)
-    observations = listen(scene, progress=not quiet)
-    from .classifier import load_classifier
-
-    predictions = load_classifier().predict_batch(np.stack([o.frame for o in observations]), FS, emitted=probe())
-    print(f"scene {scene.name!r}: {len(scene.discontinuities)} discontinuities, {len(scene.poses)} poses, "
-          f"{len(scene.sources)} sound sources; EchoCNN-E (shipped weights) hears vrecho's probe")
-    print(table(observations, predictions))
-    rec = ensure_writable_dir(out / "recordings")
-    for o in observations:
-        sf.write(rec / f"pose_{o.pose:02d}_{o.kind}.wav", o.frame, FS, subtype="FLOAT")
-    fig = figure(scene, observations, out / "surfaces.png")
-    print(f"wrote {len(observations)} recordings to {rec} and the figure {fig}")
-    return observations

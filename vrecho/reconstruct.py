@@ -976,7 +976,7 @@ def before_after(result: Reconstruction, path: str | Path) -> Path:
     for row, pose in enumerate(views):
         for col, (mesh, title) in enumerate(((result.scan.mesh, "initial scan"), (result.repaired, "repaired"))):
             if row == 1:
-                mesh = _below(mesh, hi[2] - 0.3)
+                mesh = below(mesh, hi[2] - 0.3)
             ax = axes[row, col]
             ax.imshow(render_mesh(mesh, pose, Camera(480, 360, 80 if row == 0 else 60)))
             ax.set_title(title if row == 0 else f"{title}, from above (ceiling cut away)")
@@ -988,7 +988,7 @@ def before_after(result: Reconstruction, path: str | Path) -> Path:
     return path
 
 
-def _below(mesh, z_max: float):
+def below(mesh, z_max: float):
     """A copy of a mesh without the triangles above ``z_max`` (the ceiling, for a view from above)."""
     import copy
 

@@ -26,13 +26,15 @@ WALK_SIMULATION = Simulation(max_order=2, n_rays=0, length_s=0.06, air_absorptio
 @dataclass
 class Walk:
     """A walk's recording: ``mic`` (n,) at ``fs``; per pulse, ``pulse_times_s`` (emission, on the
-    stream's clock) and ``distance_m`` (the emitter's true distance to the target's plane)."""
+    stream's clock), ``distance_m`` (the emitter's true distance to the target's plane) and
+    ``position_m`` (K, 3) (the emitter's position)."""
 
     mic: np.ndarray
     fs: int
     pulse_times_s: np.ndarray
     distance_m: np.ndarray
     latency_s: float
+    position_m: np.ndarray
 
 
 def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: float, probe: np.ndarray,
@@ -63,7 +65,7 @@ def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: 
     n_ir = int(WALK_SIMULATION.length_s * fs)
     total = n_pulses * period + n_ir + len(probe) + latency
     x = np.zeros(total)
-    times, dists = np.zeros(n_pulses), np.zeros(n_pulses)
+    times, dists, where = np.zeros(n_pulses), np.zeros(n_pulses), np.zeros((n_pulses, 3))
     for k in range(n_pulses):
         t = k * period / fs
         s = max(0.0, t - lead_s) * speed_mps
@@ -82,11 +84,12 @@ def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: 
         x[e:e + len(seg)] += seg
         times[k] = t
         dists[k] = abs((pos - p0) @ normal)
+        where[k] = pos
     direct = np.max(np.abs(np.convolve(np.asarray(room.rir[0][0], float)[lag:lag + 64], probe)))
     n = len(x)
     x += direct * (10 ** (-snr / 20) * colored_noise(n, 1.0, rng) + 10 ** (-60 / 20) * rng.standard_normal(n))
     gain = 0.5 / direct  # the direct sound peaks at half scale
-    return Walk((x * gain)[:n_pulses * period + period], fs, times, dists, latency / fs)
+    return Walk((x * gain)[:n_pulses * period + period], fs, times, dists, latency / fs, where)
 
 
 def echo_round_trip_s(distance_m: float) -> float:

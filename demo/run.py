@@ -1,0 +1,365 @@
+"""``vrecho demo``: the whole of vrecho on one scene, each decision against the scene's truth.
+
+Steps, each with the library's own calls (nothing here decides anything itself):
+
+1. the simulated phone scan along the scene's walkthrough and its fusion
+   (:func:`vrecho.reconstruct.scan_scene`);
+2. its discontinuities, EchoCNN's answers (shipped weights) on the echoes of the frames facing
+   them, and the repair (:func:`vrecho.reconstruct.reconstruct`);
+3. what the device hears in front of each surface (:func:`vrecho.listen.listen`): the figure of
+   the surfaces' echoes;
+4. the room's sources heard by the headset's 4 microphones along the same walk, located,
+   separated and placed (:func:`localization.place_sources`);
+5. the headset call (:class:`vrecho.boundary.BoundaryMonitor`) on a walk toward each
+   discontinuity at 1 m/s (:func:`vrecho.walks.simulate_walk`);
+6. the OpenUSD export (.usda with its WAVs, and .usdz), checked by OpenUSD's validators;
+7. the walkthrough page (:mod:`demo.walkthrough`), its screenshot where Chromium is installed.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from vrecho.errors import VrechoError
+from vrecho.scene import Scene
+
+WALK_SPEED_MPS = 1.0
+WALK_FROM_M = 2.5  # a boundary walk starts this far from the surface (less where the room is smaller)
+HEAR_POSES = 12  # localization's captures along the walk (1.5 s each)
+SOURCE_RIGHT_M = 0.5
+DISPLAY_VOXEL_M = 0.05  # a source placed within this of a true one counts as found
+
+
+@dataclass
+class BoundaryWalk:
+    """The headset call on a walk toward a discontinuity: per 10 ms block the device's position
+    (K, 3), the true distance to the surface's plane and the alert level; the true distance when
+    caution and stop were first raised (None: never)."""
+
+    surface: int
+    kind: str
+    positions: np.ndarray
+    distance_m: np.ndarray
+    levels: list[str]
+    caution_at_m: float | None
+    stop_at_m: float | None
+
+    @property
+    def right(self) -> bool:
+        """A closed surface warned of before 0.5 m; an opening walked through without alarm."""
+        if self.kind == "open":
+            return self.caution_at_m is None
+        return self.caution_at_m is not None and self.caution_at_m >= 0.5
+
+
+@dataclass
+class DemoRun:
+    """A demo's results: ``rows`` the decisions against the truth (what, vrecho says, truth,
+    right), ``files`` what was written, ``seconds`` each step's time."""
+
+    scene: Scene
+    reconstruction: object  # vrecho.reconstruct.Reconstruction
+    placed: list
+    walks: list[BoundaryWalk]
+    rows: list[tuple[str, str, str, bool | None]]
+    files: dict[str, Path] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    def table(self) -> str:
+        """The decisions as a Markdown table."""
+        lines = ["| decision | vrecho says | truth | right |", "|:---|:---|:---|:---:|"]
+        mark = {True: "yes", False: "**no**", None: "-"}
+        lines += [f"| {a} | {b} | {c} | {mark[d]} |" for a, b, c, d in self.rows]
+        return "\n".join(lines)
+
+
+def _surface_name(scene: Scene, k: int) -> str:
+    d = scene.discontinuities[k]
+    return f"{d.kind} on wall {d.wall} (#{k})"
+
+
+def _hole_rows(scene: Scene, result) -> list:
+    from vrecho.reconstruct import match_truth
+
+    rows, found = [], set()
+    for k, (hole, d, action) in enumerate(zip(result.holes, result.decisions, result.actions)):
+        truth = match_truth(scene, hole)
+        said = {"open": "open", "closed": f"closed, {d.material}", "unknown": "unknown (not heard)"}[d.state]
+        said += f" (p closed {d.p_closed:.2f})"
+        if action.get("phantom_triangles_removed"):
+            said += f", {action['phantom_triangles_removed']:,} phantom triangles removed"
+        what = f"hole {k} ({hole.area_m2:.2f} m2)"
+        if truth is None:
+            rows.append((what, said, "no discontinuity there (a gap in the scan)", None))
+            continue
+        found.add(truth)
+        t = scene.discontinuities[truth]
+        right = d.state == "open" if t.is_open else (d.state == "closed" and d.material == t.kind)
+        rows.append((what, said, _surface_name(scene, truth), right))
+    for k in range(len(scene.discontinuities)):
+        if k not in found:
+            rows.append((f"{_surface_name(scene, k)}", "not found in the scan", _surface_name(scene, k), False))
+    return rows
+
+
+def _source_rows(scene: Scene, placed: list) -> list:
+    rows = []
+    truths = [np.asarray(s.position, float) for s in scene.sources]
+    used = set()
+    for k, s in enumerate(scene.sources):
+        if not placed:
+            rows.append((f"source {s.sound}", "not heard", f"at {np.round(truths[k], 2).tolist()} m", False))
+            continue
+        d = [np.linalg.norm(p.position - truths[k]) for p in placed]
+        j = int(np.argmin(d))
+        used.add(j)
+        p = placed[j]
+        rows.append((f"source {s.sound}", f"{p.name} at {np.round(p.position, 2).tolist()} m "
+                     f"(confidence {p.confidence:.2f})", f"at {np.round(truths[k], 2).tolist()} m: "
+                     f"{d[j]:.2f} m away", bool(d[j] <= SOURCE_RIGHT_M)))
+    for j, p in enumerate(placed):
+        if j not in used:
+            near = min((np.linalg.norm(p.position - t) for t in truths), default=np.inf)
+            rows.append((f"{p.name}", f"a source at {np.round(p.position, 2).tolist()} m", f"no source there "
+                         f"(nearest {near:.2f} m)", False))
+    return rows
+
+
+def _walk_rows(scene: Scene, walks: list[BoundaryWalk]) -> list:
+    rows = []
+    for w in walks:
+        at = lambda d: "never" if d is None else f"at {d:.2f} m"  # noqa: E731
+        said = f"caution {at(w.caution_at_m)}, stop {at(w.stop_at_m)}"
+        truth = ("an opening: no alarm" if w.kind == "open"
+                 else f"closed ({w.kind}): caution before 0.5 m")
+        rows.append((f"walk into {_surface_name(scene, w.surface)}", said, truth, w.right))
+    return rows
+
+
+def boundary_walks(scene: Scene, rng: np.random.Generator, progress: bool = False) -> list[BoundaryWalk]:
+    """The headset call on a walk toward each discontinuity of ``scene`` (1.6 m high, straight
+    at its centre, at 1 m/s, from up to 2.5 m away), in 10 ms blocks at 48 kHz."""
+    from tqdm import tqdm
+
+    from vrecho.boundary import BoundaryMonitor, ranging_probe
+    from vrecho.walks import simulate_walk
+
+    fs = 48000
+    out = []
+    for k in tqdm(range(len(scene.discontinuities)), desc="headset walks", unit="walk", disable=not progress):
+        d = scene.discontinuities[k]
+        origin, u, normal = scene.room.wall_frame(d.wall)  # normal: out of the room
+        target = origin + d.center_u_m * u + [0.0, 0.0, 1.6]
+        start = next((target - normal * s for s in np.arange(WALK_FROM_M, 0.9, -0.1)
+                      if scene.room.contains((target - normal * s)[None], margin_m=0.3)[0]), None)
+        if start is None:
+            continue  # no room to walk toward it
+        mon = BoundaryMonitor(fs)
+        walk = simulate_walk(scene, start, start + normal, WALK_SPEED_MPS, ranging_probe(fs), mon.period / fs, fs,
+                             rng, (origin, normal))
+        n10 = fs // 100
+        positions, distances, levels = [], [], []
+        caution = stop = None
+        for i in range(0, len(walk.mic), n10):
+            level = mon.process(walk.mic[i:i + n10]).level
+            now = min((i + n10) // mon.period, len(walk.distance_m) - 1)  # the pulse being played
+            positions.append(walk.position_m[now])
+            distances.append(walk.distance_m[now])
+            levels.append(level)
+            if level != "clear" and caution is None:
+                caution = float(walk.distance_m[now])
+            if level == "stop" and stop is None:
+                stop = float(walk.distance_m[now])
+        out.append(BoundaryWalk(k, d.kind, np.array(positions), np.array(distances), levels, caution, stop))
+    return out
+
+
+def boundary_figure(scene: Scene, walks: list[BoundaryWalk], path: Path) -> Path:
+    """Each walk's true distance against time, coloured by the alert, with the thresholds."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .walkthrough import LEVEL_COLOURS
+
+    fig, axes = plt.subplots(1, len(walks), figsize=(3.2 * len(walks), 3.2), squeeze=False, sharey=True)
+    for ax, w in zip(axes[0], walks):
+        t = 0.01 * np.arange(1, len(w.levels) + 1)
+        ax.scatter(t, w.distance_m, c=[LEVEL_COLOURS[v] for v in w.levels], s=6)
+        for y, name in ((1.0, "caution 1.0 m"), (0.5, "stop 0.5 m")):
+            ax.axhline(y, color="0.5", lw=0.7, ls="--")
+            ax.text(t[-1], y, name, ha="right", va="bottom", fontsize=7, color="0.3")
+        ax.set_title(f"into the {w.kind} (#{w.surface})", fontsize=9)
+        ax.set_xlabel("s")
+    axes[0, 0].set_ylabel("true distance to the surface (m)")
+    fig.suptitle("headset call on walks at 1 m/s: green clear, amber caution, red stop", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def _walkthrough(scene: Scene, result, room: tuple, surfaces: list, placed: list, walks: list[BoundaryWalk]):
+    """What the page shows: the scan and the repaired room (``room``: vertices, faces, colours
+    without the added surfaces, drawn apart), the ceiling cut away."""
+    import open3d as o3d
+
+    from vrecho.reconstruct import below
+    from vrecho.scene import walkthrough_path
+
+    from .walkthrough import Marker, Track, Walkthrough
+
+    top = np.percentile(np.asarray(result.scan.mesh.vertices)[:, 2], 98) - 0.3
+
+    def arrays(mesh):  # for the page: 5 cm vertex clusters (a 20 MB page becomes 7 MB)
+        mesh = below(mesh, top).simplify_vertex_clustering(voxel_size=DISPLAY_VOXEL_M)
+        colours = np.asarray(mesh.vertex_colors) if mesh.has_vertex_colors() else None
+        return np.asarray(mesh.vertices), np.asarray(mesh.triangles), colours
+
+    repaired = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(room[0]), o3d.utility.Vector3iVector(room[1]))
+    repaired.vertex_colors = o3d.utility.Vector3dVector(room[2])
+    truths = [(np.asarray(s.position, float), s.sound) for s in scene.sources]
+    heard = []
+    for p in placed:
+        label = p.name
+        if truths:
+            q, sound = min(truths, key=lambda t: np.linalg.norm(p.position - t[0]))
+            label += f": {sound}, {np.linalg.norm(p.position - q):.2f} m off"
+        heard.append(Marker(p.position, label))
+    lo = np.r_[scene.room.footprint.min(axis=0), 0.0]
+    hi = np.r_[scene.room.footprint.max(axis=0), scene.room.height_m]
+    return Walkthrough(arrays(result.scan.mesh), arrays(repaired), surfaces,
+                       (scene.camera_path or walkthrough_path(scene)).sample(120), heard,
+                       [Marker(q, f"{sound} (truth)") for q, sound in truths],
+                       [Track(w.positions, w.levels, f"walk into the {w.kind}") for w in walks],
+                       f"vrecho: {scene.name}", (lo, hi))
+
+
+def run(out: str | Path = "vrecho-out", scene: str | Path | Scene | None = None, html: str | Path | None = None,
+        browser: bool = True, screenshot: bool = True, seed: int = 0, serve: bool = False,
+        progress: bool = True) -> DemoRun:
+    """Run the demo on ``scene`` (the built-in living room when None; a scene JSON path, or a
+    :class:`~vrecho.scene.Scene`), writing everything to ``out`` and the walkthrough page to
+    ``html`` (default ``out/walkthrough.html``); open it in the browser when ``browser`` and
+    a display is there; with ``serve``, also show it on a live meshcat server until Ctrl-C.
+    ``screenshot``: write ``out/walkthrough.png`` where Chromium is installed. Prints each step
+    and, at the end, the table of decisions (also ``out/summary.md``)."""
+    import localization
+    import usd_export
+    from vrecho.classifier import load_classifier
+    from vrecho.io import atomic_write_text, ensure_writable_dir
+    from vrecho.listen import figure, listen
+    from vrecho.reconstruct import reconstruct, scan_scene, write
+    from vrecho.scene import builtin_scene, load_scene
+    from vrecho.signals import FS, probe
+
+    from . import browser as chromium
+    from . import walkthrough
+
+    if scene is None:
+        scene = builtin_scene()
+    elif not isinstance(scene, Scene):
+        scene = load_scene(scene)  # a bad scene is answered before anything is written
+    if not scene.discontinuities:
+        raise VrechoError(f"scene {scene.name!r} has no glass, mirror or opening: nothing to repair")
+    if html is not None and Path(html).suffix.lower() not in (".html", ".htm"):
+        raise VrechoError(f"html: expected a .html file, got {html}")
+    out = ensure_writable_dir(out)
+    html = out / "walkthrough.html" if html is None else Path(html)
+    ensure_writable_dir(html.parent)
+    rng = np.random.default_rng(seed)
+    seconds, files = {}, {}
+    say = print if progress else (lambda *a, **k: None)
+
+    def step(name):
+        seconds[name] = time.perf_counter()
+
+    def done(name, what):
+        seconds[name] = time.perf_counter() - seconds[name]
+        say(f"{name}: {what} ({seconds[name]:.1f} s)", flush=True)
+
+    t_all = time.perf_counter()
+    say(f"vrecho demo on {scene.name!r}: {len(scene.discontinuities)} glass, mirror or open surfaces, "
+        f"{len(scene.sources)} sound sources; writing to {out}")
+    step("scan")
+    scan = scan_scene(scene, progress=progress)
+    done("scan", f"{len(scan.views)} frames fused into {len(scan.mesh.triangles):,} triangles")
+    step("repair")
+    result = reconstruct(scan, scene, "echocnn", seed=seed, progress=progress)
+    write(result, out, scene)
+    files.update({k: out / k for k in ("initial.ply", "repaired.ply", "report.json", "before_after.png")})
+    done("repair", f"{len(result.holes)} holes, {len(result.surfaces)} surfaces added")
+    rows = _hole_rows(scene, result)
+
+    step("echoes")
+    observations = listen(scene, rng, progress=progress)
+    if observations:
+        predictions = load_classifier().predict_batch(np.stack([o.frame for o in observations]), FS, emitted=probe())
+        files["surfaces.png"] = figure(scene, observations, out / "surfaces.png")
+        from vrecho.listen import table
+
+        atomic_write_text(out / "echoes.md", table(observations, predictions) + "\n")
+        files["echoes.md"] = out / "echoes.md"
+    done("echoes", f"{len(observations)} poses facing a surface heard")
+
+    placed = []
+    if scene.sources:
+        step("sources")
+        sim = localization.hear_scene(scene, rng, n_poses=HEAR_POSES)
+        lo = np.r_[scene.room.footprint.min(axis=0), 0.0]
+        hi = np.r_[scene.room.footprint.max(axis=0), scene.room.height_m]
+        placed = localization.place_sources(sim.captures, bounds=(lo, hi), progress=progress)
+        rows += _source_rows(scene, placed)
+        done("sources", f"{len(placed)} placed from {len(sim.captures)} captures")
+
+    step("headset")
+    walks = boundary_walks(scene, rng, progress)
+    rows += _walk_rows(scene, walks)
+    if walks:
+        files["boundary.png"] = boundary_figure(scene, walks, out / "boundary.png")
+    done("headset", f"{len(walks)} walks")
+
+    step("usd")
+    mesh, surfaces = usd_export.from_reconstruction(result)
+    for name in ("scene.usda", "scene.usdz"):
+        path = usd_export.write_scene(out / name, mesh, surfaces, placed)
+        problems = usd_export.validate(path)
+        errors = [p for p in problems if p.severity == "error"]
+        rows.append((name, f"{len(surfaces)} surfaces, {len(placed)} spatial-audio source{'s' * (len(placed) != 1)}",
+                     "OpenUSD's validators: no error", not errors))
+        files[name] = path
+    done("usd", "scene.usda (+ WAVs) and scene.usdz")
+
+    step("walkthrough")
+    shown = _walkthrough(scene, result, mesh, surfaces, placed, walks)
+    atomic_write_text(html, walkthrough.static_page(shown))
+    files["walkthrough"] = html
+    shot = ""
+    if screenshot and chromium.chromium():
+        files["walkthrough.png"] = chromium.screenshot(html, out / "walkthrough.png")
+        shot = ", walkthrough.png"
+    done("walkthrough", f"{html}{shot}")
+
+    run_ = DemoRun(scene, result, placed, walks, rows, files, seconds)
+    seconds["total"] = time.perf_counter() - t_all
+    right = [r[3] for r in rows if r[3] is not None]
+    steps = ", ".join(f"{k} {v:.1f} s" for k, v in seconds.items() if k != "total")
+    tail = f"{sum(right)} of {len(right)} decisions right; {seconds['total']:.0f} s in all ({steps})"
+    atomic_write_text(out / "summary.md", run_.table() + "\n\n" + tail + "\n")
+    files["summary.md"] = out / "summary.md"
+    print(run_.table())
+    print(tail)
+    print(f"written to {out}: " + ", ".join(sorted(p.name for p in files.values())))
+    if browser:
+        if chromium.open_in_browser(html):
+            print(f"the walkthrough is open in your browser: {html}")
+        else:
+            print(f"no display to open a browser on: open {html} in one")
+    if serve:
+        walkthrough.serve(shown)
+    return run_
