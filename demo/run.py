@@ -18,6 +18,7 @@ Steps, each with the library's own calls (nothing here decides anything itself):
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -104,6 +105,20 @@ def _hole_rows(scene: Scene, result) -> list:
         if k not in found:
             rows.append((f"{_surface_name(scene, k)}", "not found in the scan", _surface_name(scene, k), False))
     return rows
+
+
+def _repair_row(m: dict) -> tuple:
+    """The repaired scan against the scene's geometry (``m``: :func:`vrecho.scan_metrics.score`'s
+    metrics, as report.json holds them): an account, not a decision."""
+    said = []
+    if m["closed_ious"]:
+        errors = [e for e in m["depth_error_cm"] if e is not None and np.isfinite(e)]
+        said.append(f"closed surfaces overlap the truth by IoU {m['closed_iou']:.2f}"
+                    + (f", planes {min(errors):.1f}-{max(errors):.1f} cm off" if errors else ""))
+    said.append(f"phantom area {m['phantom_m2_initial']:.1f} -> {m['phantom_m2']:.1f} m2")
+    if m["n_openings"]:
+        said.append(f"{m['openings_filled'] * m['n_openings']:.0f} of {m['n_openings']} openings filled")
+    return ("repaired scan", "; ".join(said), "the scene's geometry", None)
 
 
 def _source_rows(scene: Scene, placed: list) -> list:
@@ -294,7 +309,7 @@ def run(out: str | Path = "vrecho-out", scene: str | Path | Scene | None = None,
     write(result, out, scene)
     files.update({k: out / k for k in ("initial.ply", "repaired.ply", "report.json", "before_after.png")})
     done("repair", f"{len(result.holes)} holes, {len(result.surfaces)} surfaces added")
-    rows = _hole_rows(scene, result)
+    rows = _hole_rows(scene, result) + [_repair_row(json.loads((out / "report.json").read_text())["metrics"])]
 
     step("echoes")
     observations = listen(scene, rng, progress=progress)

@@ -76,9 +76,8 @@ class _Sprite(g.Object):
 
 
 def _label(text: str, colour: str = "black"):
-    """A sprite (always facing the viewer) showing ``text``, 1 unit wide before scaling."""
-    import io
-
+    """A sprite (always facing the viewer) showing ``text``, 1 x 1 before scaling (the picture is
+    8 : 1: scale it so)."""
     import matplotlib
 
     matplotlib.use("Agg")

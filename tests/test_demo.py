@@ -119,3 +119,21 @@ def test_demo_refuses_a_page_that_is_not_html_before_any_work(tmp_path):
     r = run_cli("demo", "--out", tmp_path / "out", "--html", tmp_path / "page.png", "--no-browser")
     assert r.returncode == 2 and "html" in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
+
+
+def test_the_walkthrough_is_served_live(tmp_path, capsys):
+    import urllib.request
+
+    from demo.walkthrough import Walkthrough, serve
+
+    room = _box_room()
+    camera = (np.array([[1.0, 2.0, 1.5], [3.0, 2.0, 1.5]]), np.array([[0, -1.0, 0], [1, 0, 0]]))
+    pages = []
+
+    def visit():  # what a browser does while the server runs
+        url = capsys.readouterr().out.split("served at ")[1].split()[0]
+        with urllib.request.urlopen(url, timeout=30) as r:
+            pages.append((r.status, r.read()))
+
+    serve(Walkthrough(room, room, [], camera), wait=visit)
+    assert pages[0][0] == 200 and b"MeshCat" in pages[0][1]
