@@ -31,8 +31,8 @@ from vrecho.scene import Scene
 WALK_SPEED_MPS = 1.0
 WALK_FROM_M = 2.5  # a boundary walk starts this far from the surface (less where the room is smaller)
 HEAR_POSES = 12  # localization's captures along the walk (1.5 s each)
-SOURCE_RIGHT_M = 0.5
-DISPLAY_VOXEL_M = 0.05  # a source placed within this of a true one counts as found
+SOURCE_RIGHT_M = 0.5  # a source placed within this of a true one counts as found
+DISPLAY_VOXEL_M = 0.05  # the page's meshes: vertices clustered at this size
 
 
 @dataclass
@@ -193,7 +193,7 @@ def boundary_walks(scene: Scene, rng: np.random.Generator, progress: bool = Fals
     return out
 
 
-def boundary_figure(scene: Scene, walks: list[BoundaryWalk], path: Path) -> Path:
+def boundary_figure(walks: list[BoundaryWalk], path: Path) -> Path:
     """Each walk's true distance against time, coloured by the alert, with the thresholds."""
     import matplotlib
 
@@ -246,13 +246,11 @@ def _walkthrough(scene: Scene, result, room: tuple, surfaces: list, placed: list
             q, sound = min(truths, key=lambda t: np.linalg.norm(p.position - t[0]))
             label += f": {sound}, {np.linalg.norm(p.position - q):.2f} m off"
         heard.append(Marker(p.position, label))
-    lo = np.r_[scene.room.footprint.min(axis=0), 0.0]
-    hi = np.r_[scene.room.footprint.max(axis=0), scene.room.height_m]
     return Walkthrough(arrays(result.scan.mesh), arrays(repaired), surfaces,
                        (scene.camera_path or walkthrough_path(scene)).sample(120), heard,
                        [Marker(q, f"{sound} (truth)") for q, sound in truths],
                        [Track(w.positions, w.levels, f"walk into the {w.kind}") for w in walks],
-                       f"vrecho: {scene.name}", (lo, hi))
+                       f"vrecho: {scene.name}", scene.room.box)
 
 
 def run(out: str | Path = "vrecho-out", scene: str | Path | Scene | None = None, html: str | Path | None = None,
@@ -326,9 +324,7 @@ def run(out: str | Path = "vrecho-out", scene: str | Path | Scene | None = None,
     if scene.sources:
         step("sources")
         sim = localization.hear_scene(scene, rng, n_poses=HEAR_POSES)
-        lo = np.r_[scene.room.footprint.min(axis=0), 0.0]
-        hi = np.r_[scene.room.footprint.max(axis=0), scene.room.height_m]
-        placed = localization.place_sources(sim.captures, bounds=(lo, hi), progress=progress)
+        placed = localization.place_sources(sim.captures, bounds=scene.room.box, progress=progress)
         rows += _source_rows(scene, placed)
         done("sources", f"{len(placed)} placed from {len(sim.captures)} captures")
 
@@ -336,7 +332,7 @@ def run(out: str | Path = "vrecho-out", scene: str | Path | Scene | None = None,
     walks = boundary_walks(scene, rng, progress)
     rows += _walk_rows(scene, walks)
     if walks:
-        files["boundary.png"] = boundary_figure(scene, walks, out / "boundary.png")
+        files["boundary.png"] = boundary_figure(walks, out / "boundary.png")
     done("headset", f"{len(walks)} walks")
 
     step("usd")

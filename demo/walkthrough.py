@@ -30,6 +30,9 @@ GLASS = 0x7fc8ff
 MIRROR = 0xd8dde6
 HEARD = 0xff7f0e
 TRUTH = 0x606060
+OPENING = 0x2ca02c
+UNKNOWN = 0x888888
+PATH = 0x1f3fbf
 ROOT = "/vrecho"  # everything drawn lies under it
 
 
@@ -149,8 +152,8 @@ def _surface(vis, s) -> None:
         vis[path].set_object(g.TriangularMeshGeometry(polygon.astype(np.float32), faces), material)
     else:
         loop = np.vstack([polygon, polygon[:1]]).astype(np.float32).T
-        vis[path].set_object(g.Line(g.PointsGeometry(loop), g.LineBasicMaterial(color=0x2ca02c if s.state == "open"
-                                                                                else 0x888888)))
+        vis[path].set_object(g.Line(g.PointsGeometry(loop), g.LineBasicMaterial(color=OPENING if s.state == "open"
+                                                                                else UNKNOWN)))
     centre = polygon.mean(axis=0) + [0.0, 0.0, 0.25 + np.ptp(polygon[:, 2]) / 2]
     what = s.material if s.state == "closed" else s.state
     vis[f"{ROOT}/surfaces/{s.name}_label"].set_object(_label(what))
@@ -168,7 +171,7 @@ def build(vis, w: Walkthrough, frames_per_pose: int = 6) -> None:
         _surface(vis, s)
     positions, forwards = w.camera
     vis[f"{ROOT}/camera/path"].set_object(g.Line(g.PointsGeometry(np.asarray(positions, np.float32).T),
-                                          g.LineBasicMaterial(color=0x1f3fbf, linewidth=2)))
+                                          g.LineBasicMaterial(color=PATH, linewidth=2)))
     vis[f"{ROOT}/camera/device"].set_object(_device())
     vis[f"{ROOT}/camera/device"].set_transform(_look(positions[0], forwards[0]))
     a = anim.Animation(default_framerate=30)
@@ -204,12 +207,12 @@ def build(vis, w: Walkthrough, frames_per_pose: int = 6) -> None:
 LEGEND = """<div id="vrecho-legend" style="position:absolute;left:12px;bottom:12px;padding:8px 12px;
 background:rgba(255,255,255,0.88);font:13px/1.5 sans-serif;border-radius:6px;max-width:360px">
 <b>{title}</b><br>
-<span style="color:#2a9d3f">&#9679;</span> <span style="color:#ffa600">&#9679;</span>
-<span style="color:#e60d0d">&#9679;</span> headset alert on each walk: clear, caution, stop<br>
-<span style="color:#ff7f0e">&#9679;</span> source placed from what the headset heard,
-<span style="color:#606060">&#9679;</span> true source<br>
-<span style="color:#7fc8ff">&#9632;</span> glass, <span style="color:#aab">&#9632;</span> mirror (repaired),
-<span style="color:#2ca02c">&#9633;</span> opening; <span style="color:#1f3fbf">&#8212;</span> camera path<br>
+<span style="color:#{clear}">&#9679;</span> <span style="color:#{caution}">&#9679;</span>
+<span style="color:#{stop}">&#9679;</span> headset alert on each walk: clear, caution, stop<br>
+<span style="color:#{heard:06x}">&#9679;</span> source placed from what the headset heard,
+<span style="color:#{truth:06x}">&#9679;</span> true source<br>
+<span style="color:#{glass:06x}">&#9632;</span> glass, <span style="color:#aab">&#9632;</span> mirror (repaired),
+<span style="color:#{opening:06x}">&#9633;</span> opening; <span style="color:#{path:06x}">&#8212;</span> camera path<br>
 Open Controls &#8594; Scene &#8594; vrecho &#8594; scan: toggle the initial and repaired scan;
 Animations: replay the walk.</div>"""
 
@@ -223,7 +226,9 @@ def static_page(w: Walkthrough) -> str:
         build(vis, w)
         page = vis.static_html()
     page = page.replace("<title>MeshCat</title>", f"<title>{html.escape(w.title)}</title>", 1)
-    return page.replace("</body>", LEGEND.format(title=html.escape(w.title)) + "</body>", 1)
+    return page.replace("</body>", LEGEND.format(
+        title=html.escape(w.title), heard=HEARD, truth=TRUTH, glass=GLASS, opening=OPENING, path=PATH,
+        **{k: "".join(f"{round(255 * c):02x}" for c in rgb) for k, rgb in LEVEL_COLOURS.items()}) + "</body>", 1)
 
 
 @contextlib.contextmanager

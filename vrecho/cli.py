@@ -99,9 +99,7 @@ def _heard(scene, seed: int, progress: bool) -> list:
     import localization
 
     sim = localization.hear_scene(scene, np.random.default_rng(seed))
-    lo = np.r_[scene.room.footprint.min(axis=0), 0.0]
-    hi = np.r_[scene.room.footprint.max(axis=0), scene.room.height_m]
-    placed = localization.place_sources(sim.captures, bounds=(lo, hi), progress=progress)
+    placed = localization.place_sources(sim.captures, bounds=scene.room.box, progress=progress)
     for p in placed:
         err = min(np.linalg.norm(p.position - s.position) for s in sim.sources)
         print(f"  {p.name} at {np.round(p.position, 2).tolist()} m (+/- {p.uncertainty_m or float('nan'):.2f} m, "

@@ -210,6 +210,11 @@ class Room:
     def wall_lengths(self) -> np.ndarray:
         return np.linalg.norm(np.roll(self.footprint, -1, axis=0) - self.footprint, axis=1)
 
+    @property
+    def box(self) -> tuple[np.ndarray, np.ndarray]:
+        """The room's bounding box: its low and high corners (3,), floor to ceiling."""
+        return (np.r_[self.footprint.min(axis=0), 0.0], np.r_[self.footprint.max(axis=0), self.height_m])
+
     def wall_frame(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Origin (corner ``i`` at floor level), unit direction along the wall, outward normal."""
         p0, p1 = self.footprint[i], self.footprint[(i + 1) % len(self.footprint)]
