@@ -12,12 +12,18 @@ surfaces are walked to 15 cm, openings to their plane. Half the rooms run at 44.
 half the direct sound's peak, a 20 ms dropout of zeros and a 10 ms block of NaNs every second,
 and blocks of random sizes from 1 to 2048 samples).
 
-Reports: caution raised before 0.5 m on closed surfaces; false alarms on openings (any caution
+The headset's camera (``vrecho.walks.headset_frames``: 100 degrees, rendered with its depth
+frame from the wearer's pose) shows the monitor a frame every 6 pulses (0.24 s), 50 ms after
+the pulse it was taken at (``BoundaryMonitor.see``).
+
+Reports: caution raised before 0.5 m on closed surfaces; the surface the alert names (glass,
+mirror or wall) at the first caution and at the first stop, against the truth; false alarms on openings (any caution
 or stop); the median and 90th percentile distance error (the reported distance against the
 true distance at the measuring pulse, on closed walks while it reports the target); whether
 "stop" came in the same block as the end of the echo that crossed 0.5 m; the
 processing time per 10 ms block (one thread; the median and 99th percentile), against a
-baseline timed beside every block: one matched filter (FFT correlation) of a 10 ms block.
+baseline timed beside every block: one matched filter (FFT correlation) of a 10 ms block; the
+time per camera frame shown (off the audio thread).
 """
 
 from __future__ import annotations
@@ -33,8 +39,9 @@ import numpy as np  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from vrecho.boundary import BoundaryMonitor, ranging_probe  # noqa: E402
+from vrecho.render import World  # noqa: E402
 from vrecho.scene import Discontinuity, _closed_absorption, random_scene  # noqa: E402
-from vrecho.walks import echo_round_trip_s, simulate_walk  # noqa: E402
+from vrecho.walks import echo_round_trip_s, headset_frames, simulate_walk  # noqa: E402
 
 KINDS = ("glass", "mirror", "wall", "open")
 
@@ -98,12 +105,13 @@ def baseline() -> None:
     fft.irfft(fft.rfft(_BASE[0], 1024) * _BASE[1], 1024)
 
 
-def run_walk(x: np.ndarray, fs: int, walk, kind: str, blocks: str, rng: np.random.Generator) -> dict:
+def run_walk(x: np.ndarray, fs: int, walk, kind: str, blocks: str, rng: np.random.Generator, frames: list) -> dict:
     mon = BoundaryMonitor(fs)
     period = mon.period
     n10 = int(0.01 * fs)
     first_alert = first_stop = None
-    errors, times = [], []
+    errors, times, see_s = [], [], []
+    frames = list(frames)
     i = 0
     while i < len(x):
         n = n10 if blocks == "10ms" else int(rng.integers(1, 2049))
@@ -115,6 +123,10 @@ def run_walk(x: np.ndarray, fs: int, walk, kind: str, blocks: str, rng: np.rando
         times.append((t1 - t, len(block), time.perf_counter() - t1))
         i += len(block)
         t_end = i / fs
+        while frames and frames[0][0] <= t_end:
+            t = time.perf_counter()
+            mon.see(*frames.pop(0)[1:])
+            see_s.append(time.perf_counter() - t)
         if a.pulse_time_s is not None and a.distance_m is not None and kind != "open":
             k = int(round(a.pulse_time_s * fs / period))
             if k < len(walk.distance_m) and abs(a.distance_m - walk.distance_m[k]) < 0.25:
@@ -122,13 +134,15 @@ def run_walk(x: np.ndarray, fs: int, walk, kind: str, blocks: str, rng: np.rando
         if a.level != "clear" and first_alert is None and t_end > 0.2:
             # The true distance when the alert came (the wearer kept walking after the pulse).
             now = min(int(t_end * fs / period), len(walk.distance_m) - 1)
-            first_alert = {"distance_at_alert_m": float(walk.distance_m[now]), "level": a.level}
+            first_alert = {"distance_at_alert_m": float(walk.distance_m[now]), "level": a.level, "surface": a.surface}
         if a.level == "stop" and first_stop is None and a.pulse_time_s is not None:
+            stop_surface = a.surface
             # Was "stop" raised in the block in which the echo that crossed stop_m ended?
             k = min(int(round(a.pulse_time_s * fs / period)), len(walk.distance_m) - 1)
             echo_end = k * period / fs + walk.latency_s + echo_round_trip_s(a.distance_m) + len(mon.probe) / fs
             first_stop = bool(t_end - len(block) / fs < echo_end <= t_end + 1e-9)
-    return {"first_alert": first_alert, "first_stop_same_block": first_stop, "errors": errors, "times": times}
+    return {"first_alert": first_alert, "first_stop_same_block": first_stop, "errors": errors, "times": times,
+            "stop_surface": stop_surface if first_stop is not None else None, "see_s": see_s}
 
 
 def main() -> None:
@@ -145,6 +159,7 @@ def main() -> None:
         if built is None:
             continue
         scene, targets = built
+        world = World(scene)
         fs = (44100, 48000)[made % 2]
         for kind in KINDS:
             rng = np.random.default_rng([args.seed, made, KINDS.index(kind)])
@@ -156,9 +171,10 @@ def main() -> None:
             speed = float(rng.uniform(0.5, 2.0))
             walk = simulate_walk(scene, start, goal, speed, ranging_probe(fs), 0.04, fs, rng, plane,
                                  stop_m=0.0 if kind == "open" else 0.15)
+            frames = headset_frames(world, walk)
             for condition in ("clean", "disturbed"):
                 x = walk.mic if condition == "clean" else disturb(walk.mic.copy(), fs, rng)
-                r = run_walk(x, fs, walk, kind, "10ms" if condition == "clean" else "random", rng)
+                r = run_walk(x, fs, walk, kind, "10ms" if condition == "clean" else "random", rng, frames)
                 rows.append({"room": made, "kind": kind, "speed": speed, "fs": fs, "condition": condition,
                              "start_m": float(walk.distance_m[0]), **r})
         made += 1
@@ -188,6 +204,25 @@ def main() -> None:
                     f"room {r['room']} {r['speed']:.1f} m/s alert at "
                     f"{r['first_alert']['distance_at_alert_m']:.2f} m" if r["first_alert"] else
                     f"room {r['room']} {r['speed']:.1f} m/s no alert" for r in missed))
+    print("\nThe surface the alert names, against the truth: at the first caution / at the first stop")
+    print("| condition | glass | mirror | wall | all |")
+    print("|---|---|---|---|---|")
+    for condition in ("clean", "disturbed"):
+        cells = []
+        for kinds in (("glass",), ("mirror",), ("wall",), KINDS[:3]):
+            rs = [r for r in rows if r["condition"] == condition and r["kind"] in kinds]
+            at_alert = [r["first_alert"]["surface"] == r["kind"] for r in rs if r["first_alert"]]
+            at_stop = [r["stop_surface"] == r["kind"] for r in rs if r["stop_surface"] is not None]
+            cells.append(f"{np.mean(at_alert):.1%} ({sum(at_alert)}/{len(at_alert)}) / "
+                         f"{np.mean(at_stop):.1%} ({sum(at_stop)}/{len(at_stop)})")
+        print(f"| {condition} | " + " | ".join(cells) + " |")
+        wrong = [f"room {r['room']} {r['kind']}: {r['stop_surface']}" for r in rows if r["condition"] == condition
+                 and r["stop_surface"] is not None and r["stop_surface"] != r["kind"]]
+        if wrong:
+            print("  wrong at stop: " + ", ".join(wrong))
+    see = np.array([t * 1e3 for r in rows if r["condition"] == "clean" for t in r["see_s"]])
+    print(f"camera frames shown: {len(see)} (clean), {np.mean(see):.1f} ms each (median {np.median(see):.1f}, "
+          f"99th percentile {np.percentile(see, 99):.1f})")
     ms = np.array([t * 1e3 for r in rows if r["condition"] == "clean" for t, _, _ in r["times"]])  # 10 ms blocks
     base_ms = np.mean([b * 1e3 for r in rows if r["condition"] == "clean" for _, _, b in r["times"]])
     print(f"\nprocessing per 10 ms block (one thread): mean {np.mean(ms):.3f} ms, median {np.median(ms):.3f} ms, "

@@ -39,7 +39,8 @@ DISPLAY_VOXEL_M = 0.05  # the page's meshes: vertices clustered at this size
 class BoundaryWalk:
     """The headset call on a walk toward a discontinuity: per 10 ms block the device's position
     (K, 3), the true distance to the surface's plane and the alert level; the true distance when
-    caution and stop were first raised (None: never)."""
+    caution and stop were first raised (None: never); what the stop named the surface (the
+    headset camera's answer, :meth:`~vrecho.boundary.BoundaryMonitor.see`)."""
 
     surface: int
     kind: str
@@ -48,13 +49,15 @@ class BoundaryWalk:
     levels: list[str]
     caution_at_m: float | None
     stop_at_m: float | None
+    named: str | None = None
 
     @property
     def right(self) -> bool:
-        """A closed surface warned of before 0.5 m; an opening walked through without alarm."""
+        """A closed surface warned of before 0.5 m and named right; an opening walked through
+        without alarm."""
         if self.kind == "open":
             return self.caution_at_m is None
-        return self.caution_at_m is not None and self.caution_at_m >= 0.5
+        return self.caution_at_m is not None and self.caution_at_m >= 0.5 and self.named == self.kind
 
 
 @dataclass
@@ -148,22 +151,25 @@ def _walk_rows(scene: Scene, walks: list[BoundaryWalk]) -> list:
     rows = []
     for w in walks:
         at = lambda d: "never" if d is None else f"at {d:.2f} m"  # noqa: E731
-        said = f"caution {at(w.caution_at_m)}, stop {at(w.stop_at_m)}"
+        said = f"caution {at(w.caution_at_m)}, stop {at(w.stop_at_m)}" + (f": {w.named}" if w.named else "")
         truth = ("an opening: no alarm" if w.kind == "open"
-                 else f"closed ({w.kind}): caution before 0.5 m")
+                 else f"{w.kind}: caution before 0.5 m, named {w.kind}")
         rows.append((f"walk into {_surface_name(scene, w.surface)}", said, truth, w.right))
     return rows
 
 
 def boundary_walks(scene: Scene, rng: np.random.Generator, progress: bool = False) -> list[BoundaryWalk]:
     """The headset call on a walk toward each discontinuity of ``scene`` (1.6 m high, straight
-    at its centre, at 1 m/s, from up to 2.5 m away), in 10 ms blocks at 48 kHz."""
+    at its centre, at 1 m/s, from up to 2.5 m away), in 10 ms blocks at 48 kHz, the headset's
+    camera showing it a frame every 0.24 s (:func:`vrecho.walks.headset_frames`)."""
     from tqdm import tqdm
 
     from vrecho.boundary import BoundaryMonitor, ranging_probe
-    from vrecho.walks import simulate_walk
+    from vrecho.render import World
+    from vrecho.walks import headset_frames, simulate_walk
 
     fs = 48000
+    world = World(scene)
     out = []
     for k in tqdm(range(len(scene.discontinuities)), desc="headset walks", unit="walk", disable=not progress):
         d = scene.discontinuities[k]
@@ -177,10 +183,14 @@ def boundary_walks(scene: Scene, rng: np.random.Generator, progress: bool = Fals
         walk = simulate_walk(scene, start, start + normal, WALK_SPEED_MPS, ranging_probe(fs), mon.period / fs, fs,
                              rng, (origin, normal))
         n10 = fs // 100
+        frames = headset_frames(world, walk)
         positions, distances, levels = [], [], []
-        caution = stop = None
+        caution = stop = named = None
         for i in range(0, len(walk.mic), n10):
-            level = mon.process(walk.mic[i:i + n10]).level
+            alert = mon.process(walk.mic[i:i + n10])
+            level = alert.level
+            while frames and frames[0][0] <= (i + n10) / fs:
+                mon.see(*frames.pop(0)[1:])
             now = min((i + n10) // mon.period, len(walk.distance_m) - 1)  # the pulse being played
             positions.append(walk.position_m[now])
             distances.append(walk.distance_m[now])
@@ -188,8 +198,8 @@ def boundary_walks(scene: Scene, rng: np.random.Generator, progress: bool = Fals
             if level != "clear" and caution is None:
                 caution = float(walk.distance_m[now])
             if level == "stop" and stop is None:
-                stop = float(walk.distance_m[now])
-        out.append(BoundaryWalk(k, d.kind, np.array(positions), np.array(distances), levels, caution, stop))
+                stop, named = float(walk.distance_m[now]), alert.surface
+        out.append(BoundaryWalk(k, d.kind, np.array(positions), np.array(distances), levels, caution, stop, named))
     return out
 
 
@@ -209,7 +219,7 @@ def boundary_figure(walks: list[BoundaryWalk], path: Path) -> Path:
         for y, name in ((1.0, "caution 1.0 m"), (0.5, "stop 0.5 m")):
             ax.axhline(y, color="0.5", lw=0.7, ls="--")
             ax.text(t[-1], y, name, ha="right", va="bottom", fontsize=7, color="0.3")
-        ax.set_title(f"into the {w.kind} (#{w.surface})", fontsize=9)
+        ax.set_title(f"into the {w.kind} (#{w.surface})" + (f": stop, '{w.named}'" if w.named else ""), fontsize=9)
         ax.set_xlabel("s")
     axes[0, 0].set_ylabel("true distance to the surface (m)")
     fig.suptitle("headset call on walks at 1 m/s: green clear, amber caution, red stop", fontsize=10)

@@ -8,8 +8,9 @@ import pytest
 from conftest import small_room
 from vrecho.boundary import BoundaryMonitor, ranging_probe
 from vrecho.errors import VrechoError
+from vrecho.render import World
 from vrecho.scene import Discontinuity
-from vrecho.walks import echo_round_trip_s, simulate_walk
+from vrecho.walks import echo_round_trip_s, headset_frames, simulate_walk
 
 FS = 48000
 
@@ -38,9 +39,12 @@ def door():
     return _walk("open")
 
 
-def _run(walk, mic=None, sizes=None, rng=None):
+def _run(walk, mic=None, sizes=None, rng=None, frames=()):
+    """The monitor over a walk, in blocks; ``frames``: (time, gray, depth, intrinsics) shown to
+    it once the block that reaches their time has been processed."""
     mon = BoundaryMonitor(FS)
     x = walk.mic if mic is None else mic
+    frames = list(frames)
     alerts, ends, i = [], [], 0
     while i < len(x):
         n = 480 if sizes is None else int(rng.integers(*sizes))
@@ -49,6 +53,8 @@ def _run(walk, mic=None, sizes=None, rng=None):
         alerts.append(mon.process(block, speaker))
         i += len(block)
         ends.append(i)
+        while frames and frames[0][0] <= i / FS:
+            mon.see(*frames.pop(0)[1:])
     return mon, alerts, np.array(ends)
 
 
@@ -79,6 +85,16 @@ def test_walking_into_glass_raises_caution_then_stop(glass):
            for a in alerts if a.distance_m is not None and a.pulse_time_s is not None]
     assert len(err) > 20 and np.median(err) < 0.01
     assert 0.7 < alerts[-1].closing_speed_mps < 1.3  # the walk's 1 m/s
+
+
+def test_the_headset_camera_tells_glass(glass):
+    # The camera's frames along the walk, 4 a second: the alert names the surface once seen.
+    _, alerts, ends = _run(glass, frames=headset_frames(World(small_room()), glass))
+    a, _, at = _first(alerts, ends, glass, ("caution", "stop"))
+    assert a is not None and at >= 0.5  # seeing changes no level
+    s, _, _ = _first(alerts, ends, glass, ("stop",))
+    assert s.surface == "glass"
+    assert {a.surface for a in alerts if a.level != "clear"} <= {"closed", "glass"}
 
 
 def test_walking_through_a_door_raises_nothing(door):

@@ -44,10 +44,13 @@ are flagged, and a pulse's window ends where they begin (the echoes heard wholly
 count; none if they reach the direct sound); any block size, changing from call to call; 44.1
 or 48 kHz.
 
-``surface``: "closed" for an echoing surface ahead, "opening" when the wearer moves and nothing
-ahead echoes. Glass, mirror and wall reflect a ranging chirp alike (their absorption differs by
-a few hundredths above 1 kHz; EchoCNN's audio-only material accuracy is at chance, issue 3), so
-the monitor does not guess the material: the scan's repaired surfaces carry it.
+``surface``: "opening" when the wearer moves and nothing ahead echoes; for an echoing surface
+ahead, "closed" until the headset's camera has been shown it, then what the camera makes of it
+(:meth:`BoundaryMonitor.see`, :mod:`vrecho.headset_view`): "wall" where the depth camera sees
+the surface the echo comes from, "glass" or "mirror" (EchoCNN's visual branch on the pane's crop)
+where it sees past it. The echo alone cannot tell them: glass, mirror and wall reflect a 4-20 kHz
+chirp alike (their absorption differs by a few hundredths above 1 kHz, PROTOCOL.md), and the
+cameras alone cannot find glass: it takes both.
 """
 
 from __future__ import annotations
@@ -80,7 +83,9 @@ class Alert:
     """What the monitor says after a block.
 
     ``level``: "clear", "caution" or "stop"; ``distance_m``: the nearest surface the wearer moves
-    toward (None if none); ``surface``: "closed", "opening" or None (see the module's notes);
+    toward (None if none); ``surface``: "wall", "glass", "mirror" (what the camera made of the
+    surface, :meth:`BoundaryMonitor.see`), "closed" (not yet seen), "opening" or None (see the
+    module's notes);
     ``confidence`` in [0, 1]; ``closing_speed_mps`` and ``time_to_contact_s`` of that surface;
     ``flags``: what was wrong with the input so far in this block ("nan", "dropout", "clipped",
     "no_echo"); ``pulse_time_s``: when (on the stream's clock, from the first sample) the pulse
@@ -106,6 +111,11 @@ class _Track:
     speed: float | None = None  # d distance / dt (negative: approaching), an alpha-beta filter's
     ahead: bool | None = None  # in the wearer's way, at the last update (None: cannot tell yet)
     d_hat: float = 0.0
+    views: dict = field(default_factory=dict)  # what the camera made of it: surface -> summed confidence
+
+    @property
+    def surface(self) -> str:
+        return max(self.views, key=self.views.get) if self.views else "closed"
 
     def predict(self, t: float) -> float:
         return self.d_hat + (self.speed or 0.0) * (t - self.times[-1])
@@ -292,6 +302,7 @@ class BoundaryMonitor:
         self._pulse_done = -1  # last pulse committed to the tracks
         self._direct_delay: float | None = None  # samples from emission to the direct peak (latency + s / c)
         self._alert = self._verdict = Alert()  # the alert returned; the last judgement behind it
+        self._verdict_track: _Track | None = None  # the surface it rests on
         self._oldest_approach = np.inf  # the earliest approached_at among the surfaces judged
         self._still: list[float] = []  # distances of the surfaces that stay put, at the last commit
         self._level = "clear"
@@ -368,8 +379,9 @@ class BoundaryMonitor:
             flags.append("clipped")
         self._push(x, valid)
         self._update()
-        v = self._verdict  # a new Alert per block: one already returned keeps its flags
-        self._alert = Alert(v.level, v.distance_m, v.surface, v.confidence, v.closing_speed_mps, v.time_to_contact_s,
+        v, tr = self._verdict, self._verdict_track  # a new Alert per block: one already returned keeps its flags
+        surface = tr.surface if tr is not None else v.surface  # the camera may have seen it since
+        self._alert = Alert(v.level, v.distance_m, surface, v.confidence, v.closing_speed_mps, v.time_to_contact_s,
                             tuple(dict.fromkeys(v.flags + tuple(flags))), v.pulse_time_s)
         return self._alert
 
@@ -390,6 +402,38 @@ class BoundaryMonitor:
     @property
     def alert(self) -> Alert:
         return self._alert
+
+    def see(self, image, depth, intrinsics, model=None) -> str | None:
+        """Show the monitor the headset camera's latest frame: what the surfaces ahead are.
+
+        Each surface the alert rests on or the wearer nears (the nearest, up to three) is looked for in
+        the frame at its echo's distance (:func:`vrecho.headset_view.look`): "wall" where the depth
+        camera sees it, "glass" or "mirror" where it sees past it; each frame's answer is a vote
+        weighted by its confidence, and ``alert.surface`` reports the leading one from the next
+        block on. Call it from the camera's thread a few times a second, not from the audio
+        callback (about 2 ms a surface).
+
+        ``image`` (H, W) grayscale (uint8, or floats in [0, 1]) and ``depth`` (H, W) z-depth in
+        metres (0 or NaN: no return), registered, from a camera beside the microphone looking
+        along the wearer's forward axis; ``intrinsics`` its 3 x 3 pinhole matrix; ``model``: the
+        visual branch (the shipped one by default).
+
+        Returns the surface the alert now rests on ("closed" if the frame could not tell), or None
+        when it rests on none.
+        """
+        from .headset_view import look_all
+
+        t = self._now / self.fs
+        verdict = self._verdict_track
+        near = sorted((tr for tr in list(self._tracks)  # the audio thread may change the list meanwhile
+                       if tr is not verdict and tr.ahead is not False and t - tr.times[-1] < 0.2
+                       and (tr.speed or 0.0) < -0.2), key=lambda tr: tr.predict(t))
+        tracks = [tr for tr in ([verdict] if verdict is not None else []) + near[:3 - (verdict is not None)]
+                  if tr.predict(t) > self.min_range_m]
+        for tr, v in zip(tracks, look_all(image, depth, intrinsics, [tr.predict(t) for tr in tracks], model)):
+            if v is not None:
+                tr.views[v.surface] = tr.views.get(v.surface, 0.0) + v.confidence
+        return verdict.surface if verdict is not None else None
 
     # -- Internals ---------------------------------------------------------------------------------
     def _push(self, x: np.ndarray, valid: np.ndarray) -> None:
@@ -602,6 +646,7 @@ class BoundaryMonitor:
             level = self._level_for(d, ttc)
             if best is None or (-_RANK[level], ttc, d) < (-_RANK[best[5]], best[2], best[0]):  # gravest, then soonest
                 best = (d, closing, ttc, tr, at, level)
+        self._verdict_track = None if best is None else best[3]
         if best is None:
             self._level = "clear"
             moving = any(abs(tr.closed_in(0.8)) >= self.approach_m for tr in self._tracks)

@@ -27,7 +27,8 @@ WALK_SIMULATION = Simulation(max_order=2, n_rays=0, length_s=0.06, air_absorptio
 class Walk:
     """A walk's recording: ``mic`` (n,) at ``fs``; per pulse, ``pulse_times_s`` (emission, on the
     stream's clock), ``distance_m`` (the emitter's true distance to the target's plane) and
-    ``position_m`` (K, 3) (the emitter's position)."""
+    ``position_m`` (K, 3) (the emitter's position) and ``forward`` (K, 3) (the wearer's facing,
+    unit: the heading swayed)."""
 
     mic: np.ndarray
     fs: int
@@ -35,6 +36,7 @@ class Walk:
     distance_m: np.ndarray
     latency_s: float
     position_m: np.ndarray
+    forward: np.ndarray
 
 
 def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: float, probe: np.ndarray,
@@ -65,7 +67,7 @@ def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: 
     n_ir = int(WALK_SIMULATION.length_s * fs)
     total = n_pulses * period + n_ir + len(probe) + latency
     x = np.zeros(total)
-    times, dists, where = np.zeros(n_pulses), np.zeros(n_pulses), np.zeros((n_pulses, 3))
+    times, dists, where, facing = np.zeros(n_pulses), np.zeros(n_pulses), np.zeros((n_pulses, 3)), np.zeros((n_pulses, 3))
     for k in range(n_pulses):
         t = k * period / fs
         s = max(0.0, t - lead_s) * speed_mps
@@ -85,11 +87,29 @@ def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: 
         times[k] = t
         dists[k] = abs((pos - p0) @ normal)
         where[k] = pos
+        facing[k] = fwd
     direct = np.max(np.abs(np.convolve(np.asarray(room.rir[0][0], float)[lag:lag + 64], probe)))
     n = len(x)
     x += direct * (10 ** (-snr / 20) * colored_noise(n, 1.0, rng) + 10 ** (-60 / 20) * rng.standard_normal(n))
     gain = 0.5 / direct  # the direct sound peaks at half scale
-    return Walk((x * gain)[:n_pulses * period + period], fs, times, dists, latency / fs, where)
+    return Walk((x * gain)[:n_pulses * period + period], fs, times, dists, latency / fs, where, facing)
+
+
+def headset_frames(world, walk: Walk, every: int = 6, latency_s: float = 0.05) -> list:
+    """What the headset's camera (:data:`vrecho.headset_view.HEADSET_CAMERA`, at the microphone,
+    facing the wearer's way) shows along a walk: a frame at every ``every``-th pulse, arriving
+    ``latency_s`` after it. ``world``: the walk's scene as a :class:`vrecho.render.World`.
+    Returns [(arrival time on the stream's clock, gray, depth, intrinsics)], for
+    :meth:`vrecho.boundary.BoundaryMonitor.see`."""
+    from .headset_view import HEADSET_CAMERA
+    from .render import camera_pose, render_view
+
+    frames = []
+    for k in range(0, len(walk.pulse_times_s), every):
+        pose = camera_pose(walk.position_m[k] + [0.0, 0.0, MIC_ABOVE_EMITTER_M], walk.forward[k])
+        view = render_view(world, pose, HEADSET_CAMERA)
+        frames.append((walk.pulse_times_s[k] + latency_s, view.gray, view.depth, view.intrinsics))
+    return frames
 
 
 def echo_round_trip_s(distance_m: float) -> float:

@@ -1,0 +1,348 @@
+"""What the headset's camera says of the surface its echoes found: a wall, glass or a mirror.
+
+The echo says *that* a surface lies ahead and how far (:class:`vrecho.boundary.BoundaryMonitor`);
+glass, a mirror and a wall return the monitor's 4-20 kHz probe alike (their absorption differs
+by hundredths there, PROTOCOL.md), so the echo cannot say *what* it is. The headset's depth
+camera can, because of how it fails (PROTOCOL.md, :mod:`vrecho.render`):
+
+1. **Wall.** Straight ahead (rays within ``CONE_DEG`` of the optical axis) the depth sensor
+   reads the plane the echo comes from: at least half of its readings there lie within
+   ``depth_window`` of the echo's distance.
+2. **Glass or mirror.** Otherwise the sensor sees past the echo's plane (through glass to what
+   lies beyond, in a mirror the phantom room behind it) or gets nothing back: those pixels are
+   the pane. The region they form around the straight-ahead direction, widened by 15 % on
+   each side as EchoCNN's crops of a discontinuity are (:func:`vrecho.render.crop`), resampled to
+   PROTOCOL.md's 64 x 25 grayscale crop, goes to EchoCNN's visual branch (the paper's
+   image sub-network, ``EchoCNN(inputs=("image",))``), trained here on such crops from
+   simulated headsets (:func:`train`, weights ``vrecho/assets/headset_view.pt``): glass shows
+   what lies beyond, a mirror the room.
+
+A pane that fills the frame (the region touches its edges) is still answered, from what is in
+view. The straight-ahead cone stands for the echo's specular point, the foot of the
+loudspeaker's perpendicular on the surface: the two part by ``d tan(yaw)`` when the wearer looks
+askew, so a narrow pane looked at from its edge can read as the wall beside it (walking toward
+a surface, the wearer faces it). Call :func:`look` from the camera's thread, not the audio
+callback (about 2 ms).
+
+Train the shipped weights again with ``python3 -m vrecho.headset_view`` (see :func:`train`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .errors import VrechoError
+from .models import EchoCNN, build
+from .render import CROP_SHAPE, Camera
+
+CONE_DEG = 5.0
+"""Half-angle of the straight-ahead cone whose depth readings decide "wall"."""
+MARGIN = 0.15
+"""The pane's region is widened by this share of its size on each side, as EchoCNN's crops are."""
+WEIGHTS = "headset_view.pt"
+HEADSET_CAMERA = Camera(width=320, height=240, fov_deg=100.0)
+"""The simulated headset's camera (benchmarks, tests): wide, as headsets' tracking cameras are."""
+TRAIN_SEED = 31000
+"""Training rooms are drawn from this seed up (never the benchmarks' 5000 and 6000)."""
+
+
+@dataclass
+class SurfaceView:
+    """What one camera frame says of the surface the echo found ``distance_m`` ahead.
+
+    ``surface``: "wall", "glass" or "mirror"; ``confidence`` in [0.5, 1]; ``agree``: the share of
+    the straight-ahead depth readings at the echo's distance; ``crop``: the 64 x 25 crop of the
+    pane that was classified (None for a wall).
+    """
+
+    surface: str
+    confidence: float
+    agree: float
+    crop: np.ndarray | None = None
+
+
+def depth_window(distance_m: float) -> tuple[float, float]:
+    """Z-depths (m) a depth camera beside the emitter reads, straight ahead, of a plane
+    ``distance_m`` from the emitter that it faces within 20 degrees (a ray within ``CONE_DEG`` of
+    the axis meets it at most 25 degrees off its normal: 1 / cos 25 = 1.10), with 10 cm of slack for
+    the sensor's noise and the wearer's motion between the echo and the frame."""
+    return distance_m - 0.1, 1.12 * distance_m + 0.1
+
+
+def _frame(image, depth, intrinsics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The frame checked: gray (H, W) in [0, 1], depth (H, W) with 0 for no return, and the
+    straight-ahead cone (H, W) bool."""
+    g = np.asarray(image)
+    z = np.asarray(depth, dtype=np.float64)
+    K = np.asarray(intrinsics, dtype=np.float64)
+    if g.ndim != 2 or g.shape != z.shape:
+        raise VrechoError(f"image, depth: expected two (H, W) frames of one size, got {g.shape} and {z.shape}")
+    if min(g.shape) < 16:
+        raise VrechoError(f"image: a frame of at least 16 x 16 pixels is needed, got {g.shape}")
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise VrechoError("intrinsics: expected a 3 x 3 pinhole matrix with positive focal lengths")
+    if g.dtype == np.uint8:
+        g = g.astype(np.float64) / 255
+    elif g.dtype.kind != "f" or not np.all(np.isfinite(g)) or g.min() < 0 or g.max() > 1:
+        raise VrechoError("image: expected uint8 grayscale, or finite floats in [0, 1]")
+    z = np.where(np.isfinite(z) & (z > 0), z, 0.0)  # no return: 0, as the sensor says
+    h, w = z.shape
+    v, u = np.ogrid[0:h, 0:w]
+    cone = np.hypot((u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1]) < np.tan(np.radians(CONE_DEG))
+    if not cone.any():
+        raise VrechoError("intrinsics: the principal point lies outside the frame")
+    return g.astype(np.float64), z, cone
+
+
+def _pane(g: np.ndarray, z: np.ndarray, cone: np.ndarray, distance_m: float) -> tuple[float, np.ndarray | None]:
+    lo, hi = depth_window(distance_m)
+    agree = float(np.mean((z[cone] >= lo) & (z[cone] <= hi)))
+    if agree >= 0.5:
+        return agree, None
+    from scipy import ndimage
+
+    beyond = (z == 0) | (z > hi)
+    labels, _ = ndimage.label(beyond)
+    ahead = labels[cone & beyond]
+    if not len(ahead):  # nearer than the echo straight ahead (an object in front): the pane is not in view
+        return agree, None
+    rows, cols = np.nonzero(labels == np.bincount(ahead).argmax())
+    r0, r1, c0, c1 = rows.min(), rows.max(), cols.min(), cols.max()
+    rr = np.linspace(r0 - MARGIN * (r1 - r0), r1 + MARGIN * (r1 - r0), CROP_SHAPE[0])
+    cc = np.linspace(c0 - MARGIN * (c1 - c0), c1 + MARGIN * (c1 - c0), CROP_SHAPE[1])
+    R, C = np.meshgrid(rr, cc, indexing="ij")
+    h, w = z.shape
+    inside = (R >= 0) & (R <= h - 1) & (C >= 0) & (C <= w - 1)  # outside the frame: black, as render.crop_view
+    crop = np.where(inside, ndimage.map_coordinates(g, [R, C], order=1, mode="nearest"), 0.0)
+    return agree, np.round(255 * np.clip(crop, 0, 1)).astype(np.uint8)
+
+
+def pane_crop(image, depth, intrinsics, distance_m: float) -> tuple[float, np.ndarray | None]:
+    """The share of straight-ahead depth readings at the echo's distance, and (when under half)
+    the 64 x 25 uint8 crop of the region the sensor reads past it (see the module's notes)."""
+    return _pane(*_frame(image, depth, intrinsics), distance_m)
+
+
+def look(image, depth, intrinsics, distance_m: float, model: EchoCNN | None = None) -> SurfaceView | None:
+    """What a camera frame says of the surface an echo found ``distance_m`` (m, from the
+    loudspeaker) straight ahead.
+
+    Parameters
+    ----------
+    image : numpy.ndarray, shape (H, W)
+        Grayscale, uint8 or floats in [0, 1], from a camera beside the loudspeaker looking along
+        the wearer's forward axis.
+    depth : numpy.ndarray, shape (H, W)
+        The depth sensor's z-depth in metres, registered to ``image``; 0 (or NaN) where it
+        returns nothing.
+    intrinsics : numpy.ndarray, shape (3, 3)
+        The camera's pinhole matrix.
+    distance_m : float
+        The echo's distance.
+    model : EchoCNN, optional
+        The visual branch; :func:`load_model`'s by default.
+
+    Returns
+    -------
+    SurfaceView, or None when the frame cannot tell: the depth sensor returned nothing
+    anywhere (off, or blinded), or something nearer than the echo fills the view ahead.
+    """
+    return look_all(image, depth, intrinsics, [distance_m], model)[0]
+
+
+def look_all(image, depth, intrinsics, distances_m, model: EchoCNN | None = None) -> list[SurfaceView | None]:
+    """:func:`look` for several echoes' distances in one frame (the frame read once, the crops
+    classified in one batch)."""
+    g, z, cone = _frame(image, depth, intrinsics)
+    for d in distances_m:
+        if not np.isfinite(d) or d <= 0:
+            raise VrechoError(f"distance_m: expected a positive distance, got {d!r}")
+    panes = [_pane(g, z, cone, d) for d in distances_m]
+    blind = not np.any(z > 0)
+    crops = [crop for agree, crop in panes if agree < 0.5 and crop is not None and not blind]
+    p_mirror = iter(material_probability(np.stack(crops), model) if crops else ())
+    out = []
+    for agree, crop in panes:
+        if agree >= 0.5:
+            out.append(SurfaceView("wall", min(1.0, 0.5 + agree / 2), agree))
+        elif crop is None or blind:
+            out.append(None)
+        else:
+            p = float(next(p_mirror))
+            out.append(SurfaceView("mirror" if p > 0.5 else "glass", max(p, 1 - p), agree, crop))
+    return out
+
+
+def material_probability(crops: np.ndarray, model: EchoCNN | None = None) -> np.ndarray:
+    """P(mirror) of each 64 x 25 uint8 crop (N, 64, 25)."""
+    model = model or load_model()
+    x = torch.as_tensor(np.asarray(crops, np.float32) / 255)
+    with torch.no_grad():
+        return torch.softmax(model({"image": x})["material"], 1)[:, 1].numpy()
+
+
+_MODEL: EchoCNN | None = None
+
+
+def load_model(path: str | Path | None = None) -> EchoCNN:
+    """The visual branch with the weights shipped in the package (loaded once), or those of
+    ``path`` (written by :func:`train`)."""
+    global _MODEL
+    if path is None and _MODEL is not None:
+        return _MODEL
+    if path is None:
+        with resources.as_file(resources.files("vrecho.assets") / WEIGHTS) as p:
+            _MODEL = _load(Path(p))
+        return _MODEL
+    if not Path(path).is_file():
+        raise VrechoError(f"model: no such file {path}")
+    return _load(Path(path))
+
+
+def _load(path: Path) -> EchoCNN:
+    try:
+        saved = torch.load(path, weights_only=True)
+        model = build(saved["config"])
+        model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in saved["state"].items()})
+    except Exception as e:  # a foreign or damaged file: say which
+        raise VrechoError(f"model: {path} is not a headset-view model ({type(e).__name__})") from None
+    return model.eval()
+
+
+# -- Training data: simulated headsets in front of glass and mirrors ----------------------------------
+def headset_views(rng: np.random.Generator, name: str):
+    """The crops :func:`look` would classify, from one random room (PROTOCOL.md's rooms and
+    panes, :func:`vrecho.scene.random_scene`): for each glass or mirror that spans a head's
+    height, a few headset poses 0.5 to 3.5 m in front of it (head 1.45 to 1.85 m high, facing it
+    within 20 degrees, pitched and rolled a little), cameras of 60 to 110 degrees, the echo's
+    distance read to 2 cm. Yields (crop, is_mirror, distance_m)."""
+    from .render import World, camera_pose, render_view
+    from .scene import MIC_ABOVE_EMITTER_M, random_scene
+
+    scene = random_scene(rng, name, n_poses=0, n_sources=0, n_discontinuities=(1, 3))
+    room = scene.room
+    world = None
+    for d in scene.discontinuities:
+        if d.kind == "open":
+            continue
+        u0, u1, z0, z1 = d.bounds()
+        top, bottom = min(z1 - 0.1, 1.85), max(z0 + 0.1, 1.45)
+        if top <= bottom or u1 - u0 < 0.3:
+            continue  # no head's height faces it: the echo ahead would be the wall's
+        origin, u, normal = room.wall_frame(d.wall)
+        for _ in range(6):
+            foot = origin + rng.uniform(u0 + 0.1, u1 - 0.1) * u + [0.0, 0.0, rng.uniform(bottom, top)]
+            dist = rng.uniform(0.5, 3.5)
+            yaw = np.radians(rng.uniform(-20, 20))
+            forward = np.cos(yaw) * normal + np.sin(yaw) * np.cross([0.0, 0.0, 1.0], normal)
+            emitter = foot - dist * normal  # the echo's distance is to the plane: the foot stays on the pane
+            if not room.contains(emitter[None], margin_m=0.2)[0]:
+                continue
+            forward = forward + [0.0, 0.0, np.tan(np.radians(rng.uniform(-8, 8)))]
+            roll = np.radians(rng.uniform(-5, 5))
+            side = np.cross(forward, [0.0, 0.0, 1.0])
+            up = np.cos(roll) * np.array([0.0, 0.0, 1.0]) + np.sin(roll) * side / np.linalg.norm(side)
+            width = int(rng.choice([240, 320, 400]))
+            camera = Camera(width, width * 3 // 4, float(rng.uniform(60, 110)))
+            world = world or World(scene)
+            view = render_view(world, camera_pose(emitter + [0.0, 0.0, MIC_ABOVE_EMITTER_M], forward, up), camera)
+            echo = dist + rng.normal(0.0, 0.02)
+            agree, crop = pane_crop(view.gray, view.depth, view.intrinsics, echo)
+            if crop is not None:
+                yield crop, d.kind == "mirror", dist
+
+
+def _room_views(seed: int) -> list:
+    return list(headset_views(np.random.default_rng(seed), f"view_{seed}"))
+
+
+def make_dataset(n_rooms: int, seed: int = TRAIN_SEED, jobs: int = 1, progress: bool = True) -> dict[str, np.ndarray]:
+    """Crops of ``n_rooms`` rooms drawn from ``seed`` on (room ``k`` from ``seed + k``, so the
+    data do not depend on ``jobs``, the processes that render them): ``crops`` (N, 64, 25) uint8,
+    ``mirror`` (N,) bool, ``distance_m`` (N,), ``room`` (N,)."""
+    from multiprocessing import get_context
+
+    from tqdm import tqdm
+
+    seeds = range(seed, seed + n_rooms)
+    out = {"crops": [], "mirror": [], "distance_m": [], "room": []}
+    with get_context("spawn").Pool(jobs) as pool:
+        views = pool.imap(_room_views, seeds)
+        for k, room in enumerate(tqdm(views, total=n_rooms, desc="headset views", unit="room", disable=not progress)):
+            for crop, mirror, dist in room:
+                for key, value in zip(out, (crop, mirror, dist, k)):
+                    out[key].append(value)
+    return {k: np.asarray(v) for k, v in out.items()}
+
+
+def train(data: dict[str, np.ndarray], epochs: int = 60, seed: int = 0, progress: bool = True) -> tuple[EchoCNN, dict]:
+    """EchoCNN's visual branch trained on :func:`make_dataset`'s crops with
+    :func:`vrecho.train.fit` (a tenth of the rooms held out for early stopping), its material
+    head alone: the other heads' targets are left out (a depth guessed from a picture only
+    distracts it). Crops are flipped left-right at random (a pane seen from either side).
+    Returns the model and its figures on the held-out rooms."""
+    from .train import IGNORE, fit
+
+    rooms = np.unique(data["room"])
+    val_rooms = np.random.default_rng(seed).choice(rooms, max(1, len(rooms) // 10), replace=False)
+    is_val = np.isin(data["room"], val_rooms)
+
+    def split(rows, flip):
+        crops, mirror = data["crops"][rows], data["mirror"][rows]
+        if flip:
+            crops, mirror = np.concatenate([crops, crops[:, :, ::-1]]), np.concatenate([mirror, mirror])
+        n = len(crops)
+        ignored = torch.full((n,), IGNORE, dtype=torch.long)
+        y = {"open": ignored, "material": torch.as_tensor(mirror.astype(np.int64)), "depth_bin": ignored,
+             "depth_ft": ignored, "depth_m": torch.full((n,), float("nan")),
+             "src_cell": torch.full((n, 3), IGNORE, dtype=torch.long), "src_m": torch.full((n, 3), float("nan"))}
+        return {"image": torch.as_tensor(crops.astype(np.float32) / 255)}, y
+
+    torch.manual_seed(seed)
+    model = EchoCNN(inputs=("image",), hidden=64)
+    x_tr, y_tr = split(np.flatnonzero(~is_val), True)
+    x_va, y_va = split(np.flatnonzero(is_val), False)
+    history = fit(model, x_tr, y_tr, x_va, y_va, epochs=epochs, patience=8, seed=seed, progress=progress,
+                  desc="headset view")
+    p = material_probability(data["crops"][is_val], model)
+    figures = {"train_crops": int((~is_val).sum()), "val_crops": int(is_val.sum()),
+               "val_accuracy": float(np.mean((p > 0.5) == data["mirror"][is_val])), "epochs": history.epochs,
+               "seconds": history.seconds}
+    return model, figures
+
+
+def save(model: EchoCNN, path: str | Path) -> None:
+    """The weights in half precision (the crops' classes do not need more) with the model's config."""
+    torch.save({"config": model.config, "state": {k: v.half() if v.is_floating_point() else v
+                                                  for k, v in model.state_dict().items()}}, path)
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(prog="python3 -m vrecho.headset_view",
+                                 description="Train the headset view's glass/mirror model on simulated rooms.")
+    ap.add_argument("--rooms", type=int, default=800)
+    ap.add_argument("--seed", type=int, default=TRAIN_SEED)
+    ap.add_argument("--epochs", type=int, default=60)
+    ap.add_argument("--jobs", type=int, default=2, help="processes rendering the rooms")
+    ap.add_argument("--data", help="an .npz of make_dataset's crops to train on (made, and kept there, if missing)")
+    ap.add_argument("--out", default=str(Path(__file__).parent / "assets" / WEIGHTS))
+    args = ap.parse_args(argv)
+    if args.data and Path(args.data).is_file():
+        data = dict(np.load(args.data))
+    else:
+        data = make_dataset(args.rooms, args.seed, args.jobs)
+        if args.data:
+            np.savez_compressed(args.data, **data)
+    model, figures = train(data, args.epochs)
+    save(model, args.out)
+    print(f"{args.out}: {figures}")
+
+
+if __name__ == "__main__":
+    main()
