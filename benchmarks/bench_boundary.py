@@ -134,7 +134,8 @@ def run_walk(x: np.ndarray, fs: int, walk, kind: str, blocks: str, rng: np.rando
         if a.level != "clear" and first_alert is None and t_end > 0.2:
             # The true distance when the alert came (the wearer kept walking after the pulse).
             now = min(int(t_end * fs / period), len(walk.distance_m) - 1)
-            first_alert = {"distance_at_alert_m": float(walk.distance_m[now]), "level": a.level, "surface": a.surface}
+            first_alert = {"distance_at_alert_m": float(walk.distance_m[now]), "level": a.level}
+            alert_surface = a.surface
         if a.level == "stop" and first_stop is None and a.pulse_time_s is not None:
             stop_surface = a.surface
             # Was "stop" raised in the block in which the echo that crossed stop_m ended?
@@ -142,7 +143,16 @@ def run_walk(x: np.ndarray, fs: int, walk, kind: str, blocks: str, rng: np.rando
             echo_end = k * period / fs + walk.latency_s + echo_round_trip_s(a.distance_m) + len(mon.probe) / fs
             first_stop = bool(t_end - len(block) / fs < echo_end <= t_end + 1e-9)
     return {"first_alert": first_alert, "first_stop_same_block": first_stop, "errors": errors, "times": times,
+            "alert_surface": alert_surface if first_alert else None,
             "stop_surface": stop_surface if first_stop is not None else None, "see_s": see_s}
+
+
+def named(rows: list, key: str) -> str:
+    """How often the surface named at ``key`` (on the walks that got there) is right."""
+    said = [(r[key], r["kind"]) for r in rows if r[key] is not None]
+    wrong = sum(a not in (k, "closed") for a, k in said)
+    return (f"{sum(a == k for a, k in said)}/{len(said)} "
+            f"({wrong} wrong, {sum(a == 'closed' for a, _ in said)} 'closed')")
 
 
 def main() -> None:
@@ -204,22 +214,20 @@ def main() -> None:
                     f"room {r['room']} {r['speed']:.1f} m/s alert at "
                     f"{r['first_alert']['distance_at_alert_m']:.2f} m" if r["first_alert"] else
                     f"room {r['room']} {r['speed']:.1f} m/s no alert" for r in missed))
-    print("\nThe surface the alert names, against the truth: at the first caution / at the first stop")
+    print("\nThe surface the alert names at the first caution and at the first stop: right / all (named wrong; "
+          "'closed': no frame has named it yet)")
     print("| condition | glass | mirror | wall | all |")
     print("|---|---|---|---|---|")
     for condition in ("clean", "disturbed"):
         cells = []
         for kinds in (("glass",), ("mirror",), ("wall",), KINDS[:3]):
             rs = [r for r in rows if r["condition"] == condition and r["kind"] in kinds]
-            at_alert = [r["first_alert"]["surface"] == r["kind"] for r in rs if r["first_alert"]]
-            at_stop = [r["stop_surface"] == r["kind"] for r in rs if r["stop_surface"] is not None]
-            cells.append(f"{np.mean(at_alert):.1%} ({sum(at_alert)}/{len(at_alert)}) / "
-                         f"{np.mean(at_stop):.1%} ({sum(at_stop)}/{len(at_stop)})")
+            cells.append(" / ".join(named(rs, key) for key in ("alert_surface", "stop_surface")))
         print(f"| {condition} | " + " | ".join(cells) + " |")
-        wrong = [f"room {r['room']} {r['kind']}: {r['stop_surface']}" for r in rows if r["condition"] == condition
-                 and r["stop_surface"] is not None and r["stop_surface"] != r["kind"]]
+        wrong = [f"room {r['room']} {r['kind']} {r['speed']:.1f} m/s: {r['stop_surface']}" for r in rows
+                 if r["condition"] == condition and r["stop_surface"] is not None and r["stop_surface"] != r["kind"]]
         if wrong:
-            print("  wrong at stop: " + ", ".join(wrong))
+            print("  not right at stop: " + ", ".join(wrong))
     see = np.array([t * 1e3 for r in rows if r["condition"] == "clean" for t in r["see_s"]])
     print(f"camera frames shown: {len(see)} (clean), {np.mean(see):.1f} ms each (median {np.median(see):.1f}, "
           f"99th percentile {np.percentile(see, 99):.1f})")

@@ -326,7 +326,7 @@ def save(model: EchoCNN, path: str | Path) -> None:
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python3 -m vrecho.headset_view",
                                  description="Train the headset view's glass/mirror model on simulated rooms.")
-    ap.add_argument("--rooms", type=int, default=800)
+    ap.add_argument("--rooms", type=int, default=3000)
     ap.add_argument("--seed", type=int, default=TRAIN_SEED)
     ap.add_argument("--epochs", type=int, default=60)
     ap.add_argument("--jobs", type=int, default=2, help="processes rendering the rooms")
