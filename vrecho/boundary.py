@@ -411,7 +411,7 @@ class BoundaryMonitor:
         camera sees it, "glass" or "mirror" where it sees past it; each frame's answer is a vote
         weighted by its confidence, and ``alert.surface`` reports the leading one from the next
         block on. Call it from the camera's thread a few times a second, not from the audio
-        callback (about 2 ms a surface).
+        callback (some 5 to 15 ms a frame on one core: EchoCNN's visual branch).
 
         ``image`` (H, W) grayscale (uint8, or floats in [0, 1]) and ``depth`` (H, W) z-depth in
         metres (0 or NaN: no return), registered, from a camera beside the microphone looking
@@ -428,9 +428,9 @@ class BoundaryMonitor:
         near = sorted((tr for tr in list(self._tracks)  # the audio thread may change the list meanwhile
                        if tr is not verdict and tr.ahead is not False and t - tr.times[-1] < 0.2
                        and (tr.speed or 0.0) < -0.2), key=lambda tr: tr.predict(t))
-        tracks = [tr for tr in ([verdict] if verdict is not None else []) + near[:3 - (verdict is not None)]
-                  if tr.predict(t) > self.min_range_m]
-        for tr, v in zip(tracks, look_all(image, depth, intrinsics, [tr.predict(t) for tr in tracks], model)):
+        asked = [(tr, tr.predict(t)) for tr in ([verdict] if verdict is not None else []) + near[:3 - (verdict is not None)]]
+        asked = [(tr, d) for tr, d in asked if d > self.min_range_m]
+        for (tr, _), v in zip(asked, look_all(image, depth, intrinsics, [d for _, d in asked], model)):
             if v is not None:
                 tr.views[v.surface] = tr.views.get(v.surface, 0.0) + v.confidence
         return verdict.surface if verdict is not None else None

@@ -22,7 +22,7 @@ view. The straight-ahead cone stands for the echo's specular point, the foot of 
 loudspeaker's perpendicular on the surface: the two part by ``d tan(yaw)`` when the wearer looks
 askew, so a narrow pane looked at from its edge can read as the wall beside it (walking toward
 a surface, the wearer faces it). Call :func:`look` from the camera's thread, not the audio
-callback (about 2 ms).
+callback (a few milliseconds a frame).
 
 Train the shipped weights again with ``python3 -m vrecho.headset_view`` (see :func:`train`).
 """
