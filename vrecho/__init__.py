@@ -8,7 +8,8 @@ is an opening, a pane of glass or a mirror, and how far away it is. Modules, one
 ``train`` (targets, losses, the training loop), ``evaluate`` (the benchmark harness and tables),
 ``classifier`` (``load_classifier``: shipped weights, ``predict``), ``reconstruct`` (the camera's
 scan and its repair), ``scan_metrics`` (a repair against the truth), ``boundary`` (the headset
-call) and ``walks`` (its simulated walks), ``capture`` and ``colmap`` (real captures), ``listen``
+call), ``headset_view`` (what the headset's camera says of the surface an echo found) and
+``walks`` (simulated walks and the camera along them), ``capture`` and ``colmap`` (real captures), ``listen``
 (what the device hears in front of each surface), ``cli`` (the ``vrecho`` command; ``demo``
 runs the top-level :mod:`demo` package).
 """
