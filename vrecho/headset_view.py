@@ -164,8 +164,8 @@ def look_all(image, depth, intrinsics, distances_m, model: EchoCNN | None = None
         if not np.isfinite(d) or d <= 0:
             raise VrechoError(f"distance_m: expected a positive distance, got {d!r}")
     panes = [_pane(g, z, cone, d) for d in distances_m]
-    blind = not np.any(z > 0)
-    crops = [crop for agree, crop in panes if agree < 0.5 and crop is not None and not blind]
+    blind = not np.any(z > 0)  # a pane only where the sensor returns something somewhere
+    crops = [] if blind else [crop for _, crop in panes if crop is not None]
     p_mirror = iter(material_probability(np.stack(crops), model) if crops else ())
     out = []
     for agree, crop in panes:
@@ -253,7 +253,7 @@ def headset_views(rng: np.random.Generator, name: str):
             world = world or World(scene)
             view = render_view(world, camera_pose(emitter + [0.0, 0.0, MIC_ABOVE_EMITTER_M], forward, up), camera)
             echo = dist + rng.normal(0.0, 0.02)
-            agree, crop = pane_crop(view.gray, view.depth, view.intrinsics, echo)
+            _, crop = pane_crop(view.gray, view.depth, view.intrinsics, echo)
             if crop is not None:
                 yield crop, d.kind == "mirror", dist
 
