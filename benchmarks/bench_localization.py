@@ -13,9 +13,11 @@ background noise 30 dB down. Tables:
   position head on microphone 0 alone (each capture's answer against the nearest source);
 - SDR and SIR improvement (dB, fast_bss_eval, reference: each source's reverberant image at
   microphone 0; improvement over the mixture at microphone 0) on capture 4 of each room, per
-  method and per reverberation time.
+  method and per reverberation time;
+- the same at the issue's target condition (2 sources, 4 microphones, RT60 0.4 s) on
+  ``--target-rooms`` more rooms of their own seeds.
 
-Usage: python3 benchmarks/bench_localization.py [--rooms 50] [--seed 7000] [--jobs 2]
+Usage: python3 benchmarks/bench_localization.py [--rooms 50] [--target-rooms 20] [--seed 7000] [--jobs 2]
 """
 
 from __future__ import annotations
@@ -34,6 +36,8 @@ sys.path.insert(0, str(ROOT))
 
 SLOW_PRA = ("CSSM", "WAVES", "TOPS")
 N_POSES, SEGMENT_S = 8, 1.5
+TARGET_RT60, TARGET_SEED_OFFSET = 0.4, 300
+SEP_NAMES = {"informed": "vrecho informed (located positions)", "informed_true": "vrecho informed (true positions)"}
 
 
 def _angles(true_dirs: np.ndarray, est_dirs: np.ndarray) -> np.ndarray:
@@ -60,12 +64,10 @@ def one_room(args):
     from scipy.optimize import linear_sum_assignment
     from scipy.signal import resample_poly
 
-    from localization import doa, locate, separate
+    from localization import doa, locate
     from localization.capture import random_walk, simulate_walk_capture
     from localization.locate import PRA_METHODS
-    from localization.separate import METHODS
     from vrecho.classifier import load_classifier
-    from vrecho.errors import VrechoError
 
     rng = np.random.default_rng(seed + index)
     n_src = 2 + index % 2
@@ -108,24 +110,53 @@ def one_room(args):
     preds = clf.predict_batch(frames.astype(np.float32), 44100)
     row["echocnn_position_m"] = [float(np.min(np.linalg.norm(true - (pose.emitter + pose.rotation @ np.array(p.source_m)), axis=1)))
                                  for pose, p in zip(sim.poses, preds)]
-    # separation on one capture
-    k = 4
+    row["sdr"], row["sir"], row["time_s"]["sep"] = _separation(sim, true, loc.positions, 4)
+    return row
+
+
+def _separation(sim, true: np.ndarray, located: np.ndarray, k: int):
+    """SDR and SIR improvement of every method on capture ``k`` (dicts by method), and each
+    method's time."""
+    from localization import separate
+    from localization.separate import METHODS
+    from vrecho.errors import VrechoError
+
+    n_src = len(true)
     cap, ref = sim.captures[k], sim.images[k, :, 0]
     sdr0, sir0 = _metrics(ref, np.repeat(cap.audio[:1], n_src, axis=0), perm=False)
-    row["sdr"], row["sir"] = {}, {}
+    sdrs, sirs, times = {}, {}, {}
     for method in METHODS + ("informed_true",):
         t = time.perf_counter()
         try:
             est = separate(cap, n_src, "informed" if method == "informed_true" else method,
-                           positions=true if method == "informed_true" else loc.positions)
+                           positions=true if method == "informed_true" else located)
         except VrechoError:  # a method that fails on a room counts as no improvement there
             est = np.repeat(cap.audio[:1], n_src, axis=0)
-            row.setdefault("failed", []).append(method)
-        row["time_s"]["sep_" + method] = time.perf_counter() - t
+        times[method] = time.perf_counter() - t
         sdr, sir = _metrics(ref, est)
-        row["sdr"][method] = float(np.mean(sdr - sdr0))
-        row["sir"][method] = float(np.mean(sir - sir0))
-    return row
+        sdrs[method] = float(np.mean(sdr - sdr0))
+        sirs[method] = float(np.mean(sir - sir0))
+    return sdrs, sirs, times
+
+
+def target_room(args):
+    """One room of the issue's separation condition: 2 sources, the 4 microphones, RT60 0.4 s
+    (seeds ``seed + TARGET_SEED_OFFSET + index``); positions located with the count given."""
+    index, seed = args
+    import torch
+
+    torch.set_num_threads(1)
+    from localization import locate
+    from localization.capture import random_walk, simulate_walk_capture
+
+    rng = np.random.default_rng(seed + TARGET_SEED_OFFSET + index)
+    room, sources, poses = random_walk(rng, 2, TARGET_RT60, N_POSES, SEGMENT_S)
+    sim = simulate_walk_capture(room, sources, poses, rng, segment_s=SEGMENT_S)
+    true = np.array([s.position for s in sources])
+    loc = locate(sim.captures, 2, bounds=((0, 0, 0), room.dims))
+    sdr, sir, times = _separation(sim, true, loc.positions, 4)
+    return {"room": index, "sounds": [s.name for s in sources], "sdr": sdr, "sir": sir, "time_s": times,
+            "position_m": np.sort(np.linalg.norm(true[:, None] - loc.positions[None], axis=-1).min(axis=1)).tolist()}
 
 
 def _pct(v, q):
@@ -169,11 +200,20 @@ def report(rows: list[dict]) -> str:
         for a, b in bins:
             sel = [r for r in rows if a <= r["rt60_s"] < b]
             cells.append(f"{np.median([r['sdr'][m] for r in sel]):+.1f} / {np.median([r['sir'][m] for r in sel]):+.1f}" if sel else "-")
-        name = {"informed": "vrecho informed (located positions)", "informed_true": "vrecho informed (true positions)"}.get(m, m)
-        lines.append(f"| {name} | " + " | ".join(cells) + f" | {np.mean([r['time_s']['sep_' + m] for r in rows]):.1f} s |")
-    failed = [m for r in rows for m in r.get("failed", [])]
-    if failed:
-        lines.append(f"\nSeparation failures (counted as the mixture): {', '.join(sorted(set(failed)))} ({len(failed)})")
+        lines.append(f"| {SEP_NAMES.get(m, m)} | " + " | ".join(cells) + f" | {np.mean([r['time_s']['sep'][m] for r in rows]):.1f} s |")
+    return "\n".join(lines)
+
+
+def report_target(rows: list[dict], seed: int) -> str:
+    """The issue's separation condition: one row per method."""
+    pos = [e for r in rows for e in r["position_m"]]
+    lines = [f"Separation at the target condition: 2 sources, 4 microphones, RT60 {TARGET_RT60} s, capture 4 "
+             f"({len(rows)} rooms, seeds {seed + TARGET_SEED_OFFSET}+; located within 0.5 m: {np.mean(np.array(pos) < 0.5):.0%} of sources)",
+             "", "| method | SDR improvement: median | mean | p25 | SIR improvement: median | time |", "|---|---|---|---|---|---|"]
+    for m in rows[0]["sdr"]:
+        v = [r["sdr"][m] for r in rows]
+        lines.append(f"| {SEP_NAMES.get(m, m)} | {np.median(v):+.1f} | {np.mean(v):+.1f} | {_pct(v, 25):+.1f} | "
+                     f"{np.median([r['sir'][m] for r in rows]):+.1f} | {np.mean([r['time_s'][m] for r in rows]):.1f} s |")
     return "\n".join(lines)
 
 
@@ -181,6 +221,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--rooms", type=int, default=50)
     ap.add_argument("--seed", type=int, default=7000)
+    ap.add_argument("--target-rooms", type=int, default=20, help="extra rooms at the issue's separation condition")
     ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1))
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "localization.json")
     a = ap.parse_args()
@@ -192,11 +233,13 @@ def main():
     work = [(i, a.seed, a.rooms) for i in range(a.rooms)]
     with get_context("spawn").Pool(a.jobs) as pool:
         rows = list(tqdm(pool.imap(one_room, work), total=a.rooms, desc="rooms"))
-    text = report(rows)
+        target = list(tqdm(pool.imap(target_room, [(i, a.seed) for i in range(a.target_rooms)]), total=a.target_rooms,
+                           desc="target rooms"))
+    text = report(rows) + ("\n\n" + report_target(target, a.seed) if target else "")
     print(text)
     print(f"\n{a.rooms} rooms, seed {a.seed}, {time.time() - t0:.0f} s with {a.jobs} processes")
     a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text(json.dumps({"seed": a.seed, "rows": rows}, indent=1))
+    a.out.write_text(json.dumps({"seed": a.seed, "rows": rows, "target_rows": target}, indent=1))
 
 
 if __name__ == "__main__":
