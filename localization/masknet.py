@@ -25,8 +25,9 @@ shipped weights took 16 epochs::
 
     python3 -m localization.masknet --rooms 1200 --epochs 16 --jobs 16 --data /tmp/masknet --out masknet.pt
 
-(6 minutes simulating on 16 cores, 9 minutes training on one H100 GPU; the same command runs
-on a CPU, where an epoch takes over an hour.)
+(6 minutes simulating on 16 cores, 9 minutes training in batches of 32 on one H100 GPU shared
+with two other training runs; the same command runs on a CPU, in batches of 8, where an epoch
+takes over an hour.)
 """
 
 from __future__ import annotations
