@@ -55,7 +55,7 @@ def test_both_sources_placed_and_separated(two_sources, tmp_path):
     # separation improves the signal-to-interference ratio on a capture
     k = 4
     y = separate(sim.captures[k], 2, "informed", positions=est)
-    assert _sir_gain(sim.images[k, :, 0], y, sim.captures[k].audio[0]) > 2.0
+    assert _sir_gain(sim.images[k, :, 0], y, sim.captures[k].audio[0]) > 12.0  # 17.7 dB with the shipped network
     # and the placed sources feed usd_export
     from pxr import Usd, UsdGeom
 
@@ -78,7 +78,7 @@ def test_informed_at_another_rate(two_sources):
     hi = Capture(resample_poly(cap.audio, 3, 1, axis=1), 48000, cap.mics)
     y = separate(hi, 2, "informed", positions=np.array([s.position for s in sim.sources]))
     assert y.shape == (2, hi.audio.shape[1]) and np.all(np.isfinite(y))
-    assert _sir_gain(resample_poly(sim.images[4, :, 0], 3, 1, axis=1), y, hi.audio[0]) > 2.0
+    assert _sir_gain(resample_poly(sim.images[4, :, 0], 3, 1, axis=1), y, hi.audio[0]) > 12.0  # 18.7 dB
 
 
 def test_mask_network(two_sources, tmp_path):
@@ -119,7 +119,7 @@ def test_blind_methods_separate(two_sources, method):
         n = cap.audio.shape[1]
         assert np.allclose(y.sum(axis=0)[1024:n - 1024], cap.audio[0, 1024:n - 1024], atol=1e-6)
     else:
-        assert _sir_gain(sim.images[4, :, 0], y, cap.audio[0]) > 0.0
+        assert _sir_gain(sim.images[4, :, 0], y, cap.audio[0]) > 3.0  # AuxIVA: 7.7 dB
 
 
 def test_doa_one_capture(two_sources):
