@@ -56,6 +56,22 @@ def _metrics(ref, est, perm=True):
     return np.asarray(out[0]), np.asarray(out[1])
 
 
+def simulate_room(seed: int, n_src: int, rt60: float):
+    """A benchmark room: the shoebox and its walk's simulated captures (``sim.sources``,
+    ``sim.poses``), from ``seed`` alone (the figures draw the same rooms)."""
+    from localization.capture import random_walk, simulate_walk_capture
+
+    rng = np.random.default_rng(seed)
+    room, sources, poses = random_walk(rng, n_src, rt60, N_POSES, SEGMENT_S)
+    return room, simulate_walk_capture(room, sources, poses, rng, segment_s=SEGMENT_S)
+
+
+def main_condition(index: int, n_rooms: int) -> tuple[int, float]:
+    """Room ``index`` of the main set: its number of sources (2 and 3 alternating) and RT60
+    (spread evenly from 0.2 to 0.8 s over ``n_rooms``)."""
+    return 2 + index % 2, 0.2 + 0.6 * index / max(1, n_rooms - 1)
+
+
 def one_room(args):
     index, seed, n_rooms = args
     import torch
@@ -65,17 +81,13 @@ def one_room(args):
     from scipy.signal import resample_poly
 
     from localization import doa, locate
-    from localization.capture import random_walk, simulate_walk_capture
     from localization.locate import PRA_METHODS
     from vrecho.classifier import load_classifier
 
-    rng = np.random.default_rng(seed + index)
-    n_src = 2 + index % 2
-    rt60 = 0.2 + 0.6 * index / max(1, n_rooms - 1)
-    room, sources, poses = random_walk(rng, n_src, rt60, N_POSES, SEGMENT_S)
-    sim = simulate_walk_capture(room, sources, poses, rng, segment_s=SEGMENT_S)
-    true = np.array([s.position for s in sources])
-    row = {"room": index, "rt60_s": rt60, "n_sources": n_src, "sounds": [s.name for s in sources], "doa": {}, "time_s": {}}
+    n_src, rt60 = main_condition(index, n_rooms)
+    room, sim = simulate_room(seed + index, n_src, rt60)
+    true = np.array([s.position for s in sim.sources])
+    row = {"room": index, "rt60_s": rt60, "n_sources": n_src, "sounds": [s.name for s in sim.sources], "doa": {}, "time_s": {}}
 
     def true_dirs(c):
         d = true - c.center
@@ -110,13 +122,13 @@ def one_room(args):
     preds = clf.predict_batch(frames.astype(np.float32), 44100)
     row["echocnn_position_m"] = [float(np.min(np.linalg.norm(true - (pose.emitter + pose.rotation @ np.array(p.source_m)), axis=1)))
                                  for pose, p in zip(sim.poses, preds)]
-    row["sdr"], row["sir"], row["time_s"]["sep"] = _separation(sim, true, loc.positions, 4)
+    row["sdr"], row["sir"], row["time_s"]["sep"], row["failed"] = _separation(sim, true, loc.positions, 4)
     return row
 
 
 def _separation(sim, true: np.ndarray, located: np.ndarray, k: int):
-    """SDR and SIR improvement of every method on capture ``k`` (dicts by method), and each
-    method's time."""
+    """SDR and SIR improvement of every method on capture ``k`` (dicts by method), each
+    method's time, and the methods that failed (counted as the mixture)."""
     from localization import separate
     from localization.separate import METHODS
     from vrecho.errors import VrechoError
@@ -124,7 +136,7 @@ def _separation(sim, true: np.ndarray, located: np.ndarray, k: int):
     n_src = len(true)
     cap, ref = sim.captures[k], sim.images[k, :, 0]
     sdr0, sir0 = _metrics(ref, np.repeat(cap.audio[:1], n_src, axis=0), perm=False)
-    sdrs, sirs, times = {}, {}, {}
+    sdrs, sirs, times, failed = {}, {}, {}, []
     for method in METHODS + ("informed_true",):
         t = time.perf_counter()
         try:
@@ -132,11 +144,12 @@ def _separation(sim, true: np.ndarray, located: np.ndarray, k: int):
                            positions=true if method == "informed_true" else located)
         except VrechoError:  # a method that fails on a room counts as no improvement there
             est = np.repeat(cap.audio[:1], n_src, axis=0)
+            failed.append(method)
         times[method] = time.perf_counter() - t
         sdr, sir = _metrics(ref, est)
         sdrs[method] = float(np.mean(sdr - sdr0))
         sirs[method] = float(np.mean(sir - sir0))
-    return sdrs, sirs, times
+    return sdrs, sirs, times, failed
 
 
 def target_room(args):
@@ -147,15 +160,12 @@ def target_room(args):
 
     torch.set_num_threads(1)
     from localization import locate
-    from localization.capture import random_walk, simulate_walk_capture
 
-    rng = np.random.default_rng(seed + TARGET_SEED_OFFSET + index)
-    room, sources, poses = random_walk(rng, 2, TARGET_RT60, N_POSES, SEGMENT_S)
-    sim = simulate_walk_capture(room, sources, poses, rng, segment_s=SEGMENT_S)
-    true = np.array([s.position for s in sources])
+    room, sim = simulate_room(seed + TARGET_SEED_OFFSET + index, 2, TARGET_RT60)
+    true = np.array([s.position for s in sim.sources])
     loc = locate(sim.captures, 2, bounds=((0, 0, 0), room.dims))
-    sdr, sir, times = _separation(sim, true, loc.positions, 4)
-    return {"room": index, "sounds": [s.name for s in sources], "sdr": sdr, "sir": sir, "time_s": times,
+    sdr, sir, times, failed = _separation(sim, true, loc.positions, 4)
+    return {"room": index, "sounds": [s.name for s in sim.sources], "sdr": sdr, "sir": sir, "time_s": times, "failed": failed,
             "position_m": np.sort(np.linalg.norm(true[:, None] - loc.positions[None], axis=-1).min(axis=1)).tolist()}
 
 
@@ -201,7 +211,12 @@ def report(rows: list[dict]) -> str:
             sel = [r for r in rows if a <= r["rt60_s"] < b]
             cells.append(f"{np.median([r['sdr'][m] for r in sel]):+.1f} / {np.median([r['sir'][m] for r in sel]):+.1f}" if sel else "-")
         lines.append(f"| {SEP_NAMES.get(m, m)} | " + " | ".join(cells) + f" | {np.mean([r['time_s']['sep'][m] for r in rows]):.1f} s |")
-    return "\n".join(lines)
+    return "\n".join(lines + _failures(rows))
+
+
+def _failures(rows: list[dict]) -> list[str]:
+    failed = [m for r in rows for m in r["failed"]]
+    return [f"\nSeparation failures (counted as the mixture): {', '.join(sorted(set(failed)))} ({len(failed)})"] if failed else []
 
 
 def report_target(rows: list[dict], seed: int) -> str:
@@ -214,7 +229,7 @@ def report_target(rows: list[dict], seed: int) -> str:
         v = [r["sdr"][m] for r in rows]
         lines.append(f"| {SEP_NAMES.get(m, m)} | {np.median(v):+.1f} | {np.mean(v):+.1f} | {_pct(v, 25):+.1f} | "
                      f"{np.median([r['sir'][m] for r in rows]):+.1f} | {np.mean([r['time_s'][m] for r in rows]):.1f} s |")
-    return "\n".join(lines)
+    return "\n".join(lines + _failures(rows))
 
 
 def main():

@@ -4,7 +4,7 @@ The world map of vrecho's ``locate`` (each capture's onset votes toward every po
 over captures; the highest point over height shown), the headset's poses along the walk with
 their forward axes, the true sources and the located ones.
 
-Usage: python3 benchmarks/figure_localization.py [--seed 7000] [--room 0] [--out docs/localization.png]
+Usage: python3 benchmarks/figure_localization.py [--seed 7000] [--room 0] [--rooms 50] [--out docs/localization.png]
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seed", type=int, default=7000)
     ap.add_argument("--room", type=int, default=0)
+    ap.add_argument("--rooms", type=int, default=50, help="the benchmark's number of rooms (it spreads RT60 over them)")
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "localization.png")
     a = ap.parse_args()
     import matplotlib
@@ -30,15 +31,13 @@ def main():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from bench_localization import N_POSES, SEGMENT_S
+    from bench_localization import main_condition, simulate_room
     from localization import locate
-    from localization.capture import random_walk, simulate_walk_capture
     from localization.locate import _grid, _Votes
 
-    rng = np.random.default_rng(a.seed + a.room)
-    n_src = 2 + a.room % 2
-    room, sources, poses = random_walk(rng, n_src, 0.2 + 0.6 * a.room / 49, N_POSES, SEGMENT_S)
-    sim = simulate_walk_capture(room, sources, poses, rng, segment_s=SEGMENT_S)
+    n_src, rt60 = main_condition(a.room, a.rooms)
+    room, sim = simulate_room(a.seed + a.room, n_src, rt60)
+    sources, poses = sim.sources, sim.poses
     found = locate(sim.captures, bounds=((0, 0, 0), room.dims))
     votes = _Votes(sim.captures)
     step = 0.05

@@ -30,14 +30,11 @@ def main():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from bench_localization import N_POSES, SEGMENT_S, TARGET_RT60, TARGET_SEED_OFFSET, _metrics
+    from bench_localization import TARGET_RT60, TARGET_SEED_OFFSET, _metrics, simulate_room
     from localization import locate, separate
-    from localization.capture import random_walk, simulate_walk_capture
     from localization.separate import _stft
 
-    rng = np.random.default_rng(a.seed + TARGET_SEED_OFFSET + a.room)
-    room, sources, poses = random_walk(rng, 2, TARGET_RT60, N_POSES, SEGMENT_S)
-    sim = simulate_walk_capture(room, sources, poses, rng, segment_s=SEGMENT_S)
+    room, sim = simulate_room(a.seed + TARGET_SEED_OFFSET + a.room, 2, TARGET_RT60)
     cap, ref = sim.captures[4], sim.images[4, :, 0]
     found = locate(sim.captures, 2, bounds=((0, 0, 0), room.dims))
     sdr0, _ = _metrics(ref, np.repeat(cap.audio[:1], 2, axis=0), perm=False)
@@ -59,7 +56,7 @@ def main():
     axes[0, 0].set_title("mixture at microphone 0")
     for ax in axes[0, 1:]:
         ax.axis("off")
-    for k, s in enumerate(sources):
+    for k, s in enumerate(sim.sources):
         d = np.linalg.norm(s.position - cap.center)
         axes[k + 1, 0].imshow(spec(ref[k]), **kw)
         axes[k + 1, 0].set_title(f"{s.name} ({d:.1f} m away): reference")
