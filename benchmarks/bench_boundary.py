@@ -38,10 +38,11 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")  # one core, as a headset would gi
 import numpy as np  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from vrecho.boundary import BoundaryMonitor, ranging_probe  # noqa: E402
-from vrecho.render import World  # noqa: E402
-from vrecho.scene import Discontinuity, _closed_absorption, random_scene  # noqa: E402
-from vrecho.walks import echo_round_trip_s, headset_frames, simulate_walk  # noqa: E402
+from vrecho.headset import BoundaryMonitor, ranging_probe  # noqa: E402
+from vrecho.sim.render import World  # noqa: E402
+from vrecho.scene import Discontinuity  # noqa: E402
+from vrecho.sim.scenes import closed_absorption, random_scene  # noqa: E402
+from vrecho.sim.walks import echo_round_trip_s, headset_frames, simulate_walk  # noqa: E402
 
 KINDS = ("glass", "mirror", "wall", "open")
 
@@ -64,7 +65,7 @@ def bench_room(rng: np.random.Generator, k: int):
             z0 = float(rng.uniform(0.1, 0.4))
             h = float(rng.uniform(1.9, room.height_m - 0.1)) - z0
         if kind != "wall":
-            absorption = (1.0,) * 7 if kind == "open" else _closed_absorption(kind, rng)
+            absorption = (1.0,) * 7 if kind == "open" else closed_absorption(kind, rng)
             scene.discontinuities.append(Discontinuity(w, u_c, z0 + h / 2, width, h, kind, absorption, 0.02))
         targets[kind] = (w, u_c)
     return scene, targets

@@ -36,8 +36,8 @@ print(n)
 
 
 def make(folder: Path, seconds: int) -> dict:
-    from vrecho.capture import simulate_capture
-    from vrecho.render import Camera
+    from vrecho.sim.captures import simulate_capture
+    from vrecho.camera import Camera
     from vrecho.scene import builtin_scene
 
     done = folder / "capture.json"

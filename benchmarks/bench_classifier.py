@@ -32,8 +32,8 @@ def main() -> None:
     import librosa
 
     import vrecho
-    from vrecho.acoustics import device_direct_amplitude, device_impulse_response, record_pulse
-    from vrecho.render import World, crop
+    from vrecho.sim.acoustics import device_direct_amplitude, device_impulse_response, record_pulse
+    from vrecho.sim.render import World, crop
     from vrecho.signals import probe
 
     torch.set_num_threads(1)

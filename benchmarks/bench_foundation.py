@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from vrecho.acoustics import device_direct_amplitude, device_impulse_response, record_pulse
-from vrecho.data import generate, open_dataset
+from vrecho.sim.acoustics import device_direct_amplitude, device_impulse_response, record_pulse
+from vrecho.learn.datasets import generate, open_dataset
 from vrecho.features import logmel
-from vrecho.render import World, crop
-from vrecho.scene import random_scene
+from vrecho.sim.render import World, crop
+from vrecho.sim.scenes import random_scene
 from vrecho.signals import FS, SOUNDS, emitted_sound
 
 

@@ -48,7 +48,7 @@ def _angles(true_dirs: np.ndarray, est_dirs: np.ndarray) -> np.ndarray:
     return ang[r, c]
 
 
-def _metrics(ref, est, perm=True):
+def separation_metrics(ref, est, perm=True):
     import fast_bss_eval
     import torch
 
@@ -59,7 +59,7 @@ def _metrics(ref, est, perm=True):
 def simulate_room(seed: int, n_src: int, rt60: float):
     """A benchmark room: the shoebox and its walk's simulated captures (``sim.sources``,
     ``sim.poses``), from ``seed`` alone (the figures draw the same rooms)."""
-    from localization.capture import random_walk, simulate_walk_capture
+    from vrecho.sim.ambient import random_walk, simulate_walk_capture
 
     rng = np.random.default_rng(seed)
     room, sources, poses = random_walk(rng, n_src, rt60, N_POSES, SEGMENT_S)
@@ -135,7 +135,7 @@ def _separation(sim, true: np.ndarray, located: np.ndarray, k: int):
 
     n_src = len(true)
     cap, ref = sim.captures[k], sim.images[k, :, 0]
-    sdr0, sir0 = _metrics(ref, np.repeat(cap.audio[:1], n_src, axis=0), perm=False)
+    sdr0, sir0 = separation_metrics(ref, np.repeat(cap.audio[:1], n_src, axis=0), perm=False)
     sdrs, sirs, times, failed = {}, {}, {}, []
     for method in METHODS + ("informed_true",):
         t = time.perf_counter()
@@ -146,7 +146,7 @@ def _separation(sim, true: np.ndarray, located: np.ndarray, k: int):
             est = np.repeat(cap.audio[:1], n_src, axis=0)
             failed.append(method)
         times[method] = time.perf_counter() - t
-        sdr, sir = _metrics(ref, est)
+        sdr, sir = separation_metrics(ref, est)
         sdrs[method] = float(np.mean(sdr - sdr0))
         sirs[method] = float(np.mean(sir - sir0))
     return sdrs, sirs, times, failed

@@ -24,10 +24,11 @@ import time
 import numpy as np
 from tqdm import tqdm
 
-from vrecho.acoustics import MIC_SENSITIVITY, device_impulse_response
-from vrecho.capture import find_onsets, simulate_recording
+from vrecho.sim.acoustics import MIC_SENSITIVITY, device_impulse_response
+from vrecho.capture import find_onsets
+from vrecho.sim.captures import simulate_recording
 from vrecho.errors import VrechoError
-from vrecho.scene import random_scene
+from vrecho.sim.scenes import random_scene
 from vrecho.signals import FS, emitted_sound, probe
 
 CONDITIONS = {"clean": {}, "clipped": {"clip": 0.3}, "2 dropped": {"dropped": 2},

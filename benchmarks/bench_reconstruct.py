@@ -14,7 +14,7 @@ scanned along ``walkthrough_path``. Methods, side by side on the same scans:
 - vrecho, EchoCNN only (EchoCNN's answers alone);
 - vrecho, EchoCNN + scan (vrecho's choice: EchoCNN with the scan's echo delay and mirror test).
 
-Prints the table (metrics: see ``vrecho.scan_metrics``) and writes ``results.json`` and the
+Prints the table (metrics: see ``vrecho.sim.scoring``) and writes ``results.json`` and the
 per-scene rows. The repair's time excludes fusion and echo simulation.
 """
 
@@ -31,10 +31,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from vrecho.reconstruct import reconstruct, scan_scene
-from vrecho.render import World
-from vrecho.scan_metrics import score
-from vrecho.scene import random_scene
+from vrecho.reconstruct import reconstruct
+from vrecho.sim.render import World
+from vrecho.sim.scans import hear_echoes, scan_scene
+from vrecho.sim.scenes import random_scene
+from vrecho.sim.scoring import Oracle, score
 
 METHODS = ("none", "open3d fill_holes", "vrecho oracle", "vrecho EchoCNN only", "vrecho EchoCNN + scan")
 
@@ -55,9 +56,11 @@ def _room(job) -> list[dict]:
     seconds["open3d fill_holes"] = time.perf_counter() - t
     for name, labels in (("vrecho oracle", "oracle"), ("vrecho EchoCNN only", "echocnn-only"),
                          ("vrecho EchoCNN + scan", "echocnn")):
-        r = reconstruct(scan, scene, labels, variant)
+        r = reconstruct(scan, hear=hear_echoes(scene), decide=Oracle(scene) if labels == "oracle" else labels,
+                        variant=variant)
+        scan = r.scan  # with the recordings heard: the next method hears the same
         meshes[name] = r.repaired
-        seconds[name] = r.seconds["total_without_simulation"]
+        seconds[name] = r.seconds["total_without_hearing"]
     rows = []
     for name, mesh in meshes.items():
         m = score(scene, scan.mesh, mesh, world)

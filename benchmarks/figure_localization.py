@@ -33,15 +33,15 @@ def main():
 
     from bench_localization import main_condition, simulate_room
     from localization import locate
-    from localization.locate import _grid, _Votes
+    from localization.locate import Votes, grid_points
 
     n_src, rt60 = main_condition(a.room, a.rooms)
     room, sim = simulate_room(a.seed + a.room, n_src, rt60)
     sources, poses = sim.sources, sim.poses
     found = locate(sim.captures, bounds=((0, 0, 0), room.dims))
-    votes = _Votes(sim.captures)
+    votes = Votes(sim.captures)
     step = 0.05
-    grid = _grid(np.zeros(3), np.array(room.dims), step)
+    grid = grid_points(np.zeros(3), np.array(room.dims), step)
     shape = [len(np.arange(0, d + 1e-9, step)) for d in room.dims]
     world = votes.power(grid).reshape(shape).max(axis=2)
     fig, ax = plt.subplots(figsize=(7, 7 * room.dims[1] / room.dims[0] + 0.5))

@@ -30,23 +30,23 @@ def main():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from bench_localization import TARGET_RT60, TARGET_SEED_OFFSET, _metrics, simulate_room
+    from bench_localization import TARGET_RT60, TARGET_SEED_OFFSET, separation_metrics, simulate_room
     from localization import locate, separate
-    from localization.separate import _stft
+    from localization.separate import analysis
 
     room, sim = simulate_room(a.seed + TARGET_SEED_OFFSET + a.room, 2, TARGET_RT60)
     cap, ref = sim.captures[4], sim.images[4, :, 0]
     found = locate(sim.captures, 2, bounds=((0, 0, 0), room.dims))
-    sdr0, _ = _metrics(ref, np.repeat(cap.audio[:1], 2, axis=0), perm=False)
+    sdr0, _ = separation_metrics(ref, np.repeat(cap.audio[:1], 2, axis=0), perm=False)
     outs = {}
     for name, method in (("vrecho informed", "informed"), ("AuxIVA", "auxiva")):
         y = separate(cap, 2, method, positions=found.positions)
         err = np.array([[np.sum((r - e) ** 2) for e in y] for r in ref])  # the output that matches each reference
         y = y[[0, 1] if err[0, 0] + err[1, 1] <= err[0, 1] + err[1, 0] else [1, 0]]
-        outs[name] = (y, _metrics(ref, y, perm=False)[0] - sdr0)
+        outs[name] = (y, separation_metrics(ref, y, perm=False)[0] - sdr0)
 
     def spec(x):
-        return 10 * np.log10(np.abs(_stft(x[None], 512)[:, :, 0].T) ** 2 + 1e-10)
+        return 10 * np.log10(np.abs(analysis(x[None], 512)[:, :, 0].T) ** 2 + 1e-10)
 
     top = spec(cap.audio[0]).max()
     kw = dict(origin="lower", aspect="auto", cmap="magma", vmin=top - 70, vmax=top,

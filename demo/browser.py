@@ -7,6 +7,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+import webbrowser
 from pathlib import Path
 
 from vrecho.errors import VrechoError
@@ -51,8 +52,6 @@ def screenshot(page: str | Path, png: str | Path, size: tuple[int, int] = (1280,
 
 def open_in_browser(page: str | Path) -> bool:
     """Open ``page`` in the user's browser when there is a display; False when none could be."""
-    import webbrowser
-
     if os.name == "posix" and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) \
             and not shutil.which("open"):  # no display (macOS has `open`)
         return False

@@ -3,15 +3,15 @@
 Steps, each with the library's own calls (nothing here decides anything itself):
 
 1. the simulated phone scan along the scene's walkthrough and its fusion
-   (:func:`vrecho.reconstruct.scan_scene`);
+   (:func:`vrecho.sim.scans.scan_scene`);
 2. its discontinuities, EchoCNN's answers (shipped weights) on the echoes of the frames facing
    them, and the repair (:func:`vrecho.reconstruct.reconstruct`);
-3. what the device hears in front of each surface (:func:`vrecho.listen.listen`): the figure of
+3. what the device hears in front of each surface (:func:`vrecho.sim.listening.listen`): the figure of
    the surfaces' echoes;
 4. the room's sources heard by the headset's 4 microphones along the same walk, located,
    separated and placed (:func:`localization.place_sources`);
-5. the headset call (:class:`vrecho.boundary.BoundaryMonitor`) on a walk toward each
-   discontinuity at 1 m/s (:func:`vrecho.walks.simulate_walk`);
+5. the headset call (:class:`vrecho.headset.BoundaryMonitor`) on a walk toward each
+   discontinuity at 1 m/s (:func:`vrecho.sim.walks.simulate_walk`);
 6. the OpenUSD export (.usda with its WAVs, and .usdz), checked by OpenUSD's validators;
 7. the walkthrough page (:mod:`demo.walkthrough`), its screenshot where Chromium is installed.
 """
@@ -24,9 +24,28 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
+import localization
+import usd_export
+from vrecho.app.figures import below
+from vrecho.app.scans import write
 from vrecho.errors import VrechoError
-from vrecho.scene import Scene
+from vrecho.headset import BoundaryMonitor, ranging_probe
+from vrecho.io import atomic_write_text, ensure_writable_dir
+from vrecho.reconstruct import reconstruct
+from vrecho.scene import Scene, builtin_scene, load_scene
+from vrecho.signals import FS, probe
+from vrecho.sim.listening import figure, listen, table
+from vrecho.sim.render import World
+from vrecho.sim.scans import hear_echoes, scan_scene
+from vrecho.sim.scenes import walkthrough_path
+from vrecho.sim.scoring import SceneTruth, match_truth
+from vrecho.sim.walks import headset_frames, simulate_walk
+
+from . import browser as chromium
+from . import walkthrough
+from .walkthrough import LEVEL_COLOURS, Marker, Track, Walkthrough
 
 WALK_SPEED_MPS = 1.0
 WALK_FROM_M = 2.5  # a boundary walk starts this far from the surface (less where the room is smaller)
@@ -40,7 +59,7 @@ class BoundaryWalk:
     """The headset call on a walk toward a discontinuity: per 10 ms block the device's position
     (K, 3), the true distance to the surface's plane and the alert level; the true distance when
     caution and stop were first raised (None: never); what the stop named the surface (the
-    headset camera's answer, :meth:`~vrecho.boundary.BoundaryMonitor.see`)."""
+    headset camera's answer, :meth:`~vrecho.headset.BoundaryMonitor.see`)."""
 
     surface: int
     kind: str
@@ -87,7 +106,6 @@ def _surface_name(scene: Scene, k: int) -> str:
 
 
 def _hole_rows(scene: Scene, result) -> list:
-    from vrecho.reconstruct import match_truth
 
     rows, found = [], set()
     for k, (hole, d, action) in enumerate(zip(result.holes, result.decisions, result.actions)):
@@ -111,7 +129,7 @@ def _hole_rows(scene: Scene, result) -> list:
 
 
 def _repair_row(m: dict) -> tuple:
-    """The repaired scan against the scene's geometry (``m``: :func:`vrecho.scan_metrics.score`'s
+    """The repaired scan against the scene's geometry (``m``: :func:`vrecho.sim.scoring.score`'s
     metrics, as report.json holds them): an account, not a decision."""
     said = []
     if m["closed_ious"]:
@@ -161,13 +179,7 @@ def _walk_rows(scene: Scene, walks: list[BoundaryWalk]) -> list:
 def boundary_walks(scene: Scene, rng: np.random.Generator, progress: bool = False) -> list[BoundaryWalk]:
     """The headset call on a walk toward each discontinuity of ``scene`` (1.6 m high, straight
     at its centre, at 1 m/s, from up to 2.5 m away), in 10 ms blocks at 48 kHz, the headset's
-    camera showing it a frame every 0.24 s (:func:`vrecho.walks.headset_frames`)."""
-    from tqdm import tqdm
-
-    from vrecho.boundary import BoundaryMonitor, ranging_probe
-    from vrecho.render import World
-    from vrecho.walks import headset_frames, simulate_walk
-
+    camera showing it a frame every 0.24 s (:func:`vrecho.sim.walks.headset_frames`)."""
     fs = 48000
     world = World(scene)
     out = []
@@ -205,12 +217,10 @@ def boundary_walks(scene: Scene, rng: np.random.Generator, progress: bool = Fals
 
 def boundary_figure(walks: list[BoundaryWalk], path: Path) -> Path:
     """Each walk's true distance against time, coloured by the alert, with the thresholds."""
-    import matplotlib
+    import matplotlib  # heavy (0.8 s to import): only figures need it
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from .walkthrough import LEVEL_COLOURS
+    import matplotlib.pyplot as plt  # once the Agg backend is chosen: no display needed
 
     fig, axes = plt.subplots(1, len(walks), figsize=(3.2 * len(walks), 3.2), squeeze=False, sharey=True)
     for ax, w in zip(axes[0], walks):
@@ -232,12 +242,7 @@ def boundary_figure(walks: list[BoundaryWalk], path: Path) -> Path:
 def _walkthrough(scene: Scene, result, room: tuple, surfaces: list, placed: list, walks: list[BoundaryWalk]):
     """What the page shows: the scan and the repaired room (``room``: vertices, faces, colours
     without the added surfaces, drawn apart), the ceiling cut away."""
-    import open3d as o3d
-
-    from vrecho.reconstruct import below
-    from vrecho.scene import walkthrough_path
-
-    from .walkthrough import Marker, Track, Walkthrough
+    import open3d as o3d  # heavy (1.2 s to import): only the page's meshes need it
 
     top = np.percentile(np.asarray(result.scan.mesh.vertices)[:, 2], 98) - 0.3
 
@@ -272,17 +277,7 @@ def run(out: str | Path = "vrecho-out", scene: str | Path | Scene | None = None,
     a display is there; with ``serve``, also show it on a live meshcat server until Ctrl-C.
     ``screenshot``: write ``out/walkthrough.png`` where Chromium is installed. Prints each step
     and, at the end, the table of decisions (also ``out/summary.md``)."""
-    import localization
-    import usd_export
-    from vrecho.classifier import load_classifier
-    from vrecho.io import atomic_write_text, ensure_writable_dir
-    from vrecho.listen import figure, listen
-    from vrecho.reconstruct import reconstruct, scan_scene, write
-    from vrecho.scene import builtin_scene, load_scene
-    from vrecho.signals import FS, probe
-
-    from . import browser as chromium
-    from . import walkthrough
+    from vrecho.classifier import load_classifier  # torch-bound (1.7 s): `vrecho --help` needs none of it
 
     if scene is None:
         scene = builtin_scene()
@@ -313,8 +308,8 @@ def run(out: str | Path = "vrecho-out", scene: str | Path | Scene | None = None,
     scan = scan_scene(scene, progress=progress)
     done("scan", f"{len(scan.views)} frames fused into {len(scan.mesh.triangles):,} triangles")
     step("repair")
-    result = reconstruct(scan, scene, "echocnn", seed=seed, progress=progress)
-    write(result, out, scene)
+    result = reconstruct(scan, hear=hear_echoes(scene, seed=seed, progress=progress), decide="echocnn")
+    write(result, out, metrics=SceneTruth(scene).score(result.scan.mesh, result.repaired))
     files.update({k: out / k for k in ("initial.ply", "repaired.ply", "report.json", "before_after.png")})
     done("repair", f"{len(result.holes)} holes, {len(result.surfaces)} surfaces added")
     rows = _hole_rows(scene, result) + [_repair_row(json.loads((out / "report.json").read_text())["metrics"])]
@@ -324,8 +319,6 @@ def run(out: str | Path = "vrecho-out", scene: str | Path | Scene | None = None,
     if observations:
         predictions = load_classifier().predict_batch(np.stack([o.frame for o in observations]), FS, emitted=probe())
         files["surfaces.png"] = figure(scene, observations, out / "surfaces.png")
-        from vrecho.listen import table
-
         atomic_write_text(out / "echoes.md", table(observations, predictions) + "\n")
         files["echoes.md"] = out / "echoes.md"
     done("echoes", f"{len(observations)} poses facing a surface heard")
@@ -333,7 +326,7 @@ def run(out: str | Path = "vrecho-out", scene: str | Path | Scene | None = None,
     placed = []
     if scene.sources:
         step("sources")
-        sim = localization.hear_scene(scene, rng, n_poses=HEAR_POSES)
+        sim = SceneTruth(scene).captures(rng, n_poses=HEAR_POSES)
         placed = localization.place_sources(sim.captures, bounds=scene.room.box, progress=progress)
         rows += _source_rows(scene, placed)
         done("sources", f"{len(placed)} placed from {len(sim.captures)} captures")

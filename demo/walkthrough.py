@@ -18,7 +18,9 @@ Scene tree (each entry a checkbox in meshcat's "Scene" panel, top right):
 from __future__ import annotations
 
 import contextlib
+import html
 import io
+import time
 from dataclasses import dataclass, field
 
 import meshcat
@@ -81,10 +83,10 @@ class _Sprite(g.Object):
 def _label(text: str, colour: str = "black"):
     """A sprite (always facing the viewer) showing ``text``, 1 x 1 before scaling (the picture is
     8 : 1: scale it so)."""
-    import matplotlib
+    import matplotlib  # heavy (0.8 s to import): only figures need it
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # once the Agg backend is chosen: no display needed
 
     fig = plt.figure(figsize=(4, 0.5), dpi=100)
     fig.text(0.5, 0.5, text, ha="center", va="center", fontsize=15, color=colour,
@@ -162,7 +164,7 @@ def _surface(vis, s) -> None:
 
 def build(vis, w: Walkthrough, frames_per_pose: int = 6) -> None:
     """Draw ``w`` into the meshcat visualizer ``vis`` (its scene is replaced)."""
-    import meshcat.animation as anim
+    import meshcat.animation as anim  # heavy (0.6 s to import): only the walkthrough page needs it
 
     vis.delete()
     _mesh(vis, f"{ROOT}/scan/initial", w.initial, visible=False)
@@ -220,8 +222,6 @@ Animations: replay the walk.</div>"""
 def static_page(w: Walkthrough) -> str:
     """The walkthrough as one self-contained HTML page (meshcat's viewer and the scene inlined,
     a legend; no server, no network)."""
-    import html
-
     with _server() as vis:
         build(vis, w)
         page = vis.static_html()
@@ -245,8 +245,6 @@ def _server():
 def serve(w: Walkthrough, wait=None) -> None:
     """Show ``w`` on a live meshcat server (its address printed) until interrupted (Ctrl-C) or,
     with ``wait``, until ``wait()`` returns."""
-    import time
-
     with _server() as vis:
         build(vis, w)
         print(f"the walkthrough is served at {vis.url()} (Ctrl-C to stop)", flush=True)

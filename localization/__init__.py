@@ -1,9 +1,7 @@
 """localization: the room's sound sources, separated and placed in 3D (issue 5).
 
-- :class:`Capture` (capture.py): a stretch of multichannel recording at one device pose;
-  :func:`simulate_walk_capture` records a room's ambient sources (:mod:`localization.sounds`)
-  along a walkthrough with the foundation's acoustics; :func:`hear_scene` a scene's own sources
-  along its camera path.
+- :class:`Capture` (capture.py): a stretch of multichannel recording at one device pose (the
+  simulator makes them in :mod:`vrecho.sim.ambient`).
 - :func:`locate` (locate.py): world positions from all captures at once; :func:`doa`:
   pyroomacoustics' direction finders on one capture.
 - :func:`separate` (separate.py): pyroomacoustics' AuxIVA, ILRMA, FastMNMF2, a single-channel
@@ -16,16 +14,17 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
+from tqdm import tqdm
 
 from vrecho.errors import VrechoError
 
-from .capture import Capture, hear_scene, simulate_walk_capture
-from .locate import Located, doa, locate
-from .separate import separate
+from .capture import Capture
+from .locate import Located, check_captures, doa, locate
+from .separate import SEPARATORS, separate, steering
 from .sources import PlacedSource
 
-__all__ = ["Capture", "Located", "PlacedSource", "doa", "hear_scene", "locate", "place_sources", "separate",
-           "simulate_walk_capture"]
+__all__ = ["Capture", "Located", "PlacedSource", "doa", "locate", "place_sources", "separate"]
 
 CROSSFADE_S = 0.05
 
@@ -41,22 +40,16 @@ def place_sources(captures, n_sources: int | None = None, bounds=None, method: s
     captures' stretches back to back). ``confidence``: the source's share of the strongest
     source's map peak; ``uncertainty_m``: the position's standard error.
     """
-    from .locate import check_captures
-
     captures = check_captures(captures)
-    if method not in ("informed", "auxiva", "ilrma", "fastmnmf"):  # before the work
-        raise VrechoError(f"method: place_sources separates with informed, auxiva, ilrma or fastmnmf, got {method!r}")
+    multichannel = [name for name, sep in SEPARATORS.items() if sep.multichannel]
+    if method not in multichannel:  # before the work
+        raise VrechoError(f"method: place_sources separates with {', '.join(multichannel)}, got {method!r}")
     located = locate(captures, n_sources, bounds)
     k = len(located.positions)  # separate refuses more sources than a capture has microphones
     fs = captures[0].fs
     fade = int(CROSSFADE_S * fs)
     tracks = [np.zeros(0) for _ in range(k)]
-    iterator = captures
-    if progress:
-        from tqdm import tqdm
-
-        iterator = tqdm(captures, desc="separating", unit="capture")
-    for c in iterator:
+    for c in tqdm(captures, desc="separating", unit="capture", disable=not progress):
         y = separate(c, k, method, positions=located.positions)
         if method != "informed":  # blind outputs come in any order: match them to the positions
             y = y[_order_by_direction(c, y, located.positions)]
@@ -77,10 +70,6 @@ def _join(a: np.ndarray, b: np.ndarray, fade: int) -> np.ndarray:
 def _order_by_direction(capture: Capture, y: np.ndarray, positions: np.ndarray) -> np.ndarray:
     """Which separated output belongs to which position: the one most coherent, at microphone
     0, with the capture's delay-and-sum beam toward that position."""
-    from scipy.optimize import linear_sum_assignment
-
-    from .separate import steering
-
     n = capture.audio.shape[1]
     spec = np.fft.rfft(capture.audio, axis=1)
     A = steering(capture, positions, np.fft.rfftfreq(n, 1 / capture.fs))  # (F, M, K)

@@ -27,8 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vrecho.acoustics import SPEED_OF_SOUND
 from vrecho.errors import VrechoError
+from vrecho.signals import SPEED_OF_SOUND
 
 from .capture import Capture
 
@@ -86,7 +86,7 @@ def _band(fs: int, nfft: int = NFFT) -> np.ndarray:
     return (f >= BAND_HZ[0]) & (f <= min(BAND_HZ[1], 0.45 * fs))
 
 
-def _grid(lo: np.ndarray, hi: np.ndarray, step: float) -> np.ndarray:
+def grid_points(lo: np.ndarray, hi: np.ndarray, step: float) -> np.ndarray:
     axes = [np.arange(a, b + 1e-9, step) for a, b in zip(lo, hi)]
     return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
 
@@ -106,7 +106,7 @@ def search_box(captures: list[Capture], bounds=None) -> tuple[np.ndarray, np.nda
 def _refine(maps, x: np.ndarray, lo, hi, step: float, away=()) -> np.ndarray:
     """Climb from grid point ``x`` on ever finer grids, keeping ``MIN_SEPARATION_M`` from ``away``."""
     for s in (step / 2, step / 4, step / 8, step / 16):
-        pts = np.clip(_grid(x - 2 * s, x + 2 * s, s), lo, hi)
+        pts = np.clip(grid_points(x - 2 * s, x + 2 * s, s), lo, hi)
         p = maps.power(pts)
         for y in away:
             p[np.linalg.norm(pts - y, axis=1) < MIN_SEPARATION_M] = -np.inf
@@ -135,7 +135,7 @@ def triangulate(centers: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray
     return x, float(np.sqrt(np.trace(np.linalg.inv(A)) * sigma2))
 
 
-def _pose_direction(votes: "_Votes", k: int, x: np.ndarray, sphere: np.ndarray, cone_deg: float = 12.0) -> np.ndarray:
+def _pose_direction(votes: "Votes", k: int, x: np.ndarray, sphere: np.ndarray, cone_deg: float = 12.0) -> np.ndarray:
     """Capture ``k``'s own best direction among ``sphere``'s unit vectors within ``cone_deg`` of
     the point ``x``."""
     c = votes.captures[k].center
@@ -144,7 +144,7 @@ def _pose_direction(votes: "_Votes", k: int, x: np.ndarray, sphere: np.ndarray, 
     return dirs[int(np.argmax(votes.lookup(k, dirs)))]
 
 
-class _Votes:
+class Votes:
     """Each capture's onset time-frequency bins, each voting for the directions that explain it.
 
     A bin's score for a direction is its normalised beam power |a^H x|^2 / (M |x|^2), 1 when one
@@ -234,8 +234,8 @@ def locate(captures, n_sources: int | None = None, bounds=None, step_m: float = 
                                   or n_sources < 1):
         raise VrechoError(f"n_sources: expected a positive whole number or None, got {n_sources!r}")
     lo, hi = search_box(captures, bounds)
-    grid = _grid(lo, hi, step_m)
-    votes = _Votes(captures)
+    grid = grid_points(lo, hi, step_m)
+    votes = Votes(captures)
     every_vote = votes.maps  # kept for each capture's own direction once the sources are found
     found, strength = [], []
     limit = n_sources or max_sources
@@ -269,7 +269,7 @@ def doa(capture: Capture, n_sources: int, method: str = "NormMUSIC", n_grid: int
     on a sphere grid of ``n_grid`` points, as unit vectors from the array centre (world frame).
     ``n_freq``: use only that many frequency bins, evenly spread over the band (CSSM, WAVES and
     TOPS take about 20 s per capture on all of them)."""
-    import pyroomacoustics as pra
+    import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
 
     (capture,) = check_captures([capture])
     if method not in PRA_METHODS:

@@ -23,14 +23,19 @@ Every method returns an array (k, samples), the capture's length, in the order o
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Callable
+
 import numpy as np
+import scipy.cluster.hierarchy as hc
+from scipy.signal import resample_poly
 
-from vrecho.acoustics import SPEED_OF_SOUND
 from vrecho.errors import VrechoError
+from vrecho.signals import SPEED_OF_SOUND
 
+from . import masknet
 from .capture import Capture
 
-METHODS: tuple[str, ...] = ("auxiva", "ilrma", "fastmnmf", "nmf", "informed")
 BLIND_FRAME_S = 0.016
 """STFT frame of blind separation: 16 ms (256 points at 16 kHz). A capture of 1.5 s then gives
 the blind methods some 370 frames to learn their demixing from; 128 ms frames (as long as the
@@ -41,17 +46,18 @@ def _blind_nfft(fs: int) -> int:
     return int(2 ** round(np.log2(BLIND_FRAME_S * fs)))
 
 
-def _stft(audio: np.ndarray, nfft: int) -> np.ndarray:
-    """(frames, freq, channels), as pyroomacoustics' separation expects."""
-    import pyroomacoustics as pra
+def analysis(audio: np.ndarray, nfft: int) -> np.ndarray:
+    """Short-time spectra (frames, freq, channels) of ``audio`` (channels, samples), as
+    pyroomacoustics' separation expects them: Hann window of ``nfft`` points, hop ``nfft / 4``."""
+    import pyroomacoustics as pra  # heavy (1.4 s to import): only separation needs it here
 
     win = pra.hann(nfft)
     return np.stack([pra.transform.stft.analysis(ch, nfft, nfft // 4, win=win) for ch in audio], axis=-1)
 
 
-def _istft(Y: np.ndarray, n: int, nfft: int) -> np.ndarray:
-    """(k, n) signals from (frames, freq, k) spectra."""
-    import pyroomacoustics as pra
+def synthesis(Y: np.ndarray, n: int, nfft: int) -> np.ndarray:
+    """(k, n) signals from (frames, freq, k) spectra made by :func:`analysis`."""
+    import pyroomacoustics as pra  # heavy (1.4 s to import): only separation needs it here
 
     out = np.zeros((Y.shape[-1], n))
     win = pra.transform.stft.compute_synthesis_window(pra.hann(nfft), nfft // 4)
@@ -61,46 +67,72 @@ def _istft(Y: np.ndarray, n: int, nfft: int) -> np.ndarray:
     return out
 
 
-def separate(capture: Capture, n_sources: int, method: str = "informed", positions=None,
+@dataclass(frozen=True)
+class Separator:
+    """One separation method of :data:`SEPARATORS`: ``run(capture, n_sources, positions, n_iter)``
+    returns (n_sources, samples); ``multichannel``: it separates at most as many sources as the
+    capture has microphones; ``informed``: it needs the sources' positions."""
+
+    run: Callable[..., np.ndarray]
+    multichannel: bool = True
+    informed: bool = False
+
+
+def _blind(demix: Callable) -> Callable[..., np.ndarray]:
+    """A blind method on :data:`BLIND_FRAME_S` frames: ``demix(capture, X, n_sources, n_iter)``
+    gives the sources' spectra at microphone 0 from the capture's (frames, freq, mics) ``X``."""
+    def run(capture: Capture, n_sources: int, positions, n_iter: int | None) -> np.ndarray:
+        nfft = _blind_nfft(capture.fs)
+        Y = demix(capture, analysis(capture.audio, nfft), n_sources, n_iter or 50)
+        return synthesis(Y, capture.audio.shape[1], nfft)
+    return run
+
+
+def _auxiva(capture: Capture, X: np.ndarray, k: int, n_iter: int) -> np.ndarray:
+    import pyroomacoustics as pra  # heavy (1.4 s to import): only separation needs it here
+
+    return pra.bss.auxiva(X, n_src=k, n_iter=n_iter, proj_back=True)
+
+
+def _ilrma(capture: Capture, X: np.ndarray, k: int, n_iter: int) -> np.ndarray:
+    """Determined: microphone 0 and the ``k - 1`` farthest from it."""
+    import pyroomacoustics as pra  # heavy (1.4 s to import): only separation needs it here
+
+    far = np.argsort(np.linalg.norm(capture.mics - capture.mics[0], axis=1))[::-1][:k - 1]
+    try:
+        return pra.bss.ilrma(X[:, :, np.r_[0, np.sort(far)]], n_src=k, n_iter=n_iter, proj_back=True)
+    except np.linalg.LinAlgError:
+        raise VrechoError("ilrma: the demixing matrix became singular (try auxiva or informed)") from None
+
+
+def _fastmnmf(capture: Capture, X: np.ndarray, k: int, n_iter: int) -> np.ndarray:
+    import pyroomacoustics as pra  # heavy (1.4 s to import): only separation needs it here
+
+    return pra.bss.fastmnmf2(X, n_src=k, n_iter=n_iter, mic_index=0)
+
+
+def separate(capture: Capture, n_sources: int, method: str = "informed", *, positions=None,
              n_iter: int | None = None) -> np.ndarray:
     """Separate ``n_sources`` sources from ``capture`` (see the module's docstring); ``n_iter``:
     the iterations of the blind methods and NMF (informed separation has none)."""
     if not isinstance(capture, Capture):
         raise VrechoError(f"capture: expected a localization.Capture, got {type(capture).__name__}")
-    if method not in METHODS:
+    if method not in SEPARATORS:
         raise VrechoError(f"method: expected one of {METHODS}, got {method!r}")
     if isinstance(n_sources, bool) or not isinstance(n_sources, (int, np.integer)) or n_sources < 1:
         raise VrechoError(f"n_sources: expected a positive whole number, got {n_sources!r}")
+    separator = SEPARATORS[method]
     m = capture.n_mics
-    if method in ("auxiva", "ilrma", "fastmnmf", "informed") and n_sources > m:
+    if separator.multichannel and n_sources > m:
         raise VrechoError(f"{method} separates at most as many sources as microphones: {n_sources} sources, "
                           f"{m} microphone{'s' if m > 1 else ''} (use method='nmf' for one channel)")
-    if method == "informed":
+    if separator.informed:
         if positions is None:
             raise VrechoError("informed separation needs the sources' positions (localization.locate)")
         positions = np.asarray(positions, dtype=float)
         if positions.shape != (n_sources, 3) or not np.all(np.isfinite(positions)):
             raise VrechoError(f"positions: expected ({n_sources}, 3) finite positions, got shape {positions.shape}")
-    n = capture.audio.shape[1]
-    if method == "nmf":
-        return _nmf(capture.audio[0], n_sources, n_iter or 200)
-    if method == "informed":
-        return _informed(capture, positions)
-    import pyroomacoustics as pra
-
-    nfft = _blind_nfft(capture.fs)
-    X = _stft(capture.audio, nfft)
-    if method == "auxiva":
-        Y = pra.bss.auxiva(X, n_src=n_sources, n_iter=n_iter or 50, proj_back=True)
-    elif method == "ilrma":  # determined: microphone 0 and the n_sources - 1 farthest from it
-        far = np.argsort(np.linalg.norm(capture.mics - capture.mics[0], axis=1))[::-1][:n_sources - 1]
-        try:
-            Y = pra.bss.ilrma(X[:, :, np.r_[0, np.sort(far)]], n_src=n_sources, n_iter=n_iter or 50, proj_back=True)
-        except np.linalg.LinAlgError:
-            raise VrechoError("ilrma: the demixing matrix became singular (try auxiva or informed)") from None
-    else:
-        Y = pra.bss.fastmnmf2(X, n_src=n_sources, n_iter=n_iter or 50, mic_index=0)
-    return _istft(Y, n, nfft)
+    return separator.run(capture, n_sources, positions, n_iter)
 
 
 def steering(capture: Capture, positions: np.ndarray, freqs: np.ndarray) -> np.ndarray:
@@ -110,20 +142,16 @@ def steering(capture: Capture, positions: np.ndarray, freqs: np.ndarray) -> np.n
     return (dist[:1] / dist)[None] * np.exp(-2j * np.pi * freqs[:, None, None] * rel[None] / SPEED_OF_SOUND)
 
 
-def _informed(capture: Capture, positions: np.ndarray) -> np.ndarray:
+def _informed(capture: Capture, n_sources: int, positions: np.ndarray, n_iter=None) -> np.ndarray:
     """(k, samples) at the capture's rate: the mask network's shares (at 16 kHz) weight each
     source's spatial covariance; the multichannel Wiener filter R_k R_x^-1 (R_x the measured
     covariance, so the microphones' noise is in it) gives its image at microphone 0, and the
     square root of its share, bin by bin, takes out what the time-invariant filter let through."""
-    from scipy.signal import resample_poly
-
-    from . import masknet
-
     fs, nfft = masknet.FS, masknet.NFFT
     n = capture.audio.shape[1]
     g = np.gcd(capture.fs, fs)
     audio = capture.audio if capture.fs == fs else resample_poly(capture.audio, fs // g, capture.fs // g, axis=1)
-    X = _stft(audio, nfft)
+    X = analysis(audio, nfft)
     share = masknet.source_masks(X, steering(capture, positions, np.fft.rfftfreq(nfft, 1 / fs)))
     n_frames, _, m = X.shape
     Rx = np.einsum("tfm,tfn->fmn", X, np.conj(X)) / n_frames
@@ -133,16 +161,17 @@ def _informed(capture: Capture, positions: np.ndarray) -> np.ndarray:
         Rk = np.einsum("tf,tfm,tfn->fmn", share[..., k] ** 2, X, np.conj(X)) / n_frames
         out[..., k] = np.einsum("fn,tfn->tf", (Rk @ iRx)[:, 0], X) * np.sqrt(share[..., k])
     if capture.fs == fs:
-        return _istft(out, n, nfft)
-    y = resample_poly(_istft(out, audio.shape[1], nfft), capture.fs // g, fs // g, axis=1)  # back to the capture's rate
+        return synthesis(out, n, nfft)
+    y = resample_poly(synthesis(out, audio.shape[1], nfft), capture.fs // g, fs // g, axis=1)  # back to the capture's rate
     return np.pad(y[:, :n], ((0, 0), (0, max(0, n - y.shape[1]))))
 
 
-def _nmf(x: np.ndarray, k: int, n_iter: int, per_source: int = 8, nfft: int = 1024) -> np.ndarray:
-    """Single-channel separation by KL-NMF (see the module's docstring)."""
-    import scipy.cluster.hierarchy as hc
-
-    S = _stft(x[None], nfft)[:, :, 0]  # (T, F)
+def _nmf(capture: Capture, k: int, positions=None, n_iter: int | None = None, per_source: int = 8,
+         nfft: int = 1024) -> np.ndarray:
+    """Single-channel separation of microphone 0 by KL-NMF (see the module's docstring)."""
+    x = capture.audio[0]
+    n_iter = n_iter or 200
+    S = analysis(x[None], nfft)[:, :, 0]  # (T, F)
     V = np.abs(S).T + 1e-9  # (F, T)
     rng = np.random.default_rng(0)
     r = k * per_source
@@ -157,4 +186,15 @@ def _nmf(x: np.ndarray, k: int, n_iter: int, per_source: int = 8, nfft: int = 10
                       for g in range(k)])
     masks = parts / (parts.sum(axis=0) + 1e-12)
     Y = (masks * S.T[None]).transpose(2, 1, 0)  # (T, F, k)
-    return _istft(Y, len(x), nfft)
+    return synthesis(Y, len(x), nfft)
+
+
+SEPARATORS: dict[str, Separator] = {
+    "auxiva": Separator(_blind(_auxiva)),
+    "ilrma": Separator(_blind(_ilrma)),
+    "fastmnmf": Separator(_blind(_fastmnmf)),
+    "nmf": Separator(_nmf, multichannel=False),
+    "informed": Separator(_informed, informed=True),
+}
+"""The separation methods by name (as pyroomacoustics' ``doa.algorithms`` maps names to classes)."""
+METHODS: tuple[str, ...] = tuple(SEPARATORS)

@@ -9,7 +9,7 @@ import pytest
 @pytest.fixture(scope="session")
 def tiny_dataset(tmp_path_factory):
     """The tiny preset, generated once per session with a cache of its own (so it is simulated)."""
-    from vrecho.data import generate
+    from vrecho.learn.datasets import generate
 
     root = tmp_path_factory.mktemp("tiny")
     return generate(root / "ds", "tiny", seed=0, workers=2, cache=root / "cache", progress=False)

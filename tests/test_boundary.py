@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from conftest import small_room
-from vrecho.boundary import BoundaryMonitor, ranging_probe
+from vrecho.headset import BoundaryMonitor, ranging_probe
 from vrecho.errors import VrechoError
-from vrecho.render import World
+from vrecho.sim.render import World
 from vrecho.scene import Discontinuity
-from vrecho.walks import echo_round_trip_s, headset_frames, simulate_walk
+from vrecho.sim.walks import echo_round_trip_s, headset_frames, simulate_walk
 
 FS = 48000
 

@@ -8,7 +8,7 @@ from vrecho.errors import VrechoError
 
 @pytest.fixture(scope="module")
 def ir():
-    from vrecho.acoustics import device_impulse_response
+    from vrecho.sim.acoustics import device_impulse_response
     from vrecho.scene import builtin_scene
 
     scene = builtin_scene()
@@ -17,7 +17,8 @@ def ir():
 
 @pytest.mark.parametrize("snr_db, clip", [(20, None), (10, 0.3)])
 def test_onsets_are_found_to_a_sample_through_noise_clipping_drift_and_a_missing_pulse(ir, snr_db, clip):
-    from vrecho.capture import find_onsets, simulate_recording
+    from vrecho.capture import find_onsets
+    from vrecho.sim.captures import simulate_recording
 
     rng = np.random.default_rng(4)
     x, truth = simulate_recording(ir, 12, rng, snr_db=snr_db, drift=0.004, clip=clip, dropped=(6,))
@@ -40,7 +41,8 @@ def test_no_pulses_is_one_clear_error():
 
 
 def test_frames_start_at_the_emission_like_the_simulators(ir):
-    from vrecho.capture import cut_frames, find_onsets, simulate_recording
+    from vrecho.capture import cut_frames, find_onsets
+    from vrecho.sim.captures import simulate_recording
     from vrecho.signals import probe
 
     rng = np.random.default_rng(5)
@@ -60,8 +62,9 @@ def test_frames_start_at_the_emission_like_the_simulators(ir):
 def test_a_paused_player_and_a_clap_lose_no_pulse(ir):
     """The player paused (or looping its file with a gap at the seam) restarts the train off the
     beat: nothing is missing there; a clap louder than the pulses is not one."""
-    from vrecho.acoustics import MIC_SENSITIVITY
-    from vrecho.capture import find_onsets, simulate_recording
+    from vrecho.sim.acoustics import MIC_SENSITIVITY
+    from vrecho.capture import find_onsets
+    from vrecho.sim.captures import simulate_recording
     from vrecho.signals import emitted_sound
 
     rng = np.random.default_rng(11)
@@ -96,10 +99,12 @@ def test_a_video_round_trip_gives_the_simulated_frames_answers(ir, tmp_path, cod
     answers as EchoCNN does on the simulated recording's frames passed directly."""
     import csv
 
-    from vrecho.capture import cut_frames, find_onsets, simulate_recording, write_video
+    from vrecho.capture import cut_frames, find_onsets, write_video
+    from vrecho.sim.captures import simulate_recording
     from vrecho.classifier import load_classifier
     from vrecho.cli import main
-    from vrecho.render import Camera, camera_pose, render_view
+    from vrecho.camera import Camera, camera_pose
+    from vrecho.sim.render import render_view
     from vrecho.scene import builtin_scene
     from vrecho.signals import probe
 
@@ -129,7 +134,7 @@ def test_bad_captures_are_one_clear_error(tmp_path):
     import av
     import soundfile as sf
 
-    from vrecho.capture import run
+    from vrecho.app.captures import capture
     from vrecho.cli import main
 
     mute = tmp_path / "mute.mp4"
@@ -151,7 +156,7 @@ def test_bad_captures_are_one_clear_error(tmp_path):
                                   (None, noise, "no pulse train"), (None, None, "give a video"),
                                   (mute, noise, "give a video")):
         with pytest.raises(VrechoError, match=message):
-            run(tmp_path / "o", video, audio)
+            capture(tmp_path / "o", video, audio)
     assert main(["capture", str(mute), "--out", str(tmp_path / "o2")]) == 2
 
 
@@ -161,8 +166,8 @@ def test_bad_captures_are_one_clear_error(tmp_path):
 def posed(tmp_path_factory):
     """The small room's capture as a user brings it: a video (pictures and the pulses' sound,
     each pulse heard where the device then was), COLMAP's poses of its pictures, the scan's mesh."""
-    from vrecho.capture import simulate_capture
-    from vrecho.render import Camera
+    from vrecho.sim.captures import simulate_capture
+    from vrecho.camera import Camera
 
     from conftest import small_room
 
@@ -176,7 +181,7 @@ def test_a_posed_capture_repairs_the_users_mesh_and_exports(posed, tmp_path):
     import json
 
     from vrecho.cli import main
-    from vrecho.scan_metrics import phantom_area_m2
+    from vrecho.sim.scoring import phantom_area_m2
 
     from pxr import Usd
 
@@ -232,7 +237,7 @@ def test_poses_that_do_not_fit_the_capture_are_one_clear_error(posed, tmp_path):
 
     import open3d as o3d
 
-    from vrecho.capture import run
+    from vrecho.app.captures import capture
 
     _, sim = posed
     far = tmp_path / "far.ply"  # the mesh of somewhere else
@@ -256,7 +261,7 @@ def test_poses_that_do_not_fit_the_capture_are_one_clear_error(posed, tmp_path):
              (dict(poses=sim["poses"], mesh=sim["mesh"]), "image-fps")]
     for kwargs, message in cases:
         with pytest.raises(VrechoError, match=message):
-            run(tmp_path / "o", sim["video"], **kwargs)
+            capture(tmp_path / "o", sim["video"], **kwargs)
 
 
 def test_a_y_up_model_is_turned_z_up(posed, tmp_path):

@@ -20,8 +20,8 @@ def clf():
 @pytest.fixture(scope="module")
 def living_room_frames():
     """The built-in living room: vrecho's probe heard in front of each surface (simulated now)."""
-    from vrecho.acoustics import device_direct_amplitude, device_impulse_response, record_pulse
-    from vrecho.render import World, crop
+    from vrecho.sim.acoustics import device_direct_amplitude, device_impulse_response, record_pulse
+    from vrecho.sim.render import World, crop
     from vrecho.signals import probe
 
     scene = vrecho.builtin_scene()
@@ -112,7 +112,7 @@ def test_foreign_weights_file(tmp_path):
 
 def test_training_resumes_to_the_same_weights(tmp_path):
     from vrecho.models import EchoCNN
-    from vrecho.train import fit
+    from vrecho.learn.train import fit
 
     g = torch.Generator().manual_seed(0)
     n = 64
@@ -138,7 +138,7 @@ def test_a_tiny_model_beats_chance(tiny_dataset, tmp_path):
     """EchoCNN-E trained for a few epochs on the tiny preset's 4 training rooms, judged in its
     unseen test room: depth on closed surfaces at least 3x better than always answering the
     training rooms' median depth."""
-    from vrecho.evaluate import Harness, evaluate, train_methods
+    from vrecho.learn.evaluate import Harness, evaluate, train_methods
 
     train_methods(tiny_dataset, tmp_path / "run", ["EchoCNN-E"], epochs=3, progress=False)
     res = evaluate(tiny_dataset, tmp_path / "run", tmp_path / "eval", progress=False, methods=["EchoCNN-E"])

@@ -5,7 +5,7 @@ import pytest
 
 from vrecho import colmap
 from vrecho.errors import VrechoError
-from vrecho.render import Camera, camera_pose
+from vrecho.camera import Camera, camera_pose
 
 
 def test_poses_round_trip_through_colmaps_text_format(tmp_path):

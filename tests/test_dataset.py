@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import zarr
 
-from vrecho.data import LABEL_COLUMNS, generate, open_dataset, read_labels
+from vrecho.learn.datasets import LABEL_COLUMNS, generate, open_dataset, read_labels
 from vrecho.errors import VrechoError
 from vrecho.scene import load_scene
 from vrecho.signals import SOUNDS, TRAIN_SOUNDS

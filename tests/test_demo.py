@@ -105,7 +105,7 @@ def test_the_demo_on_a_users_scene_with_the_page_elsewhere(tmp_path):
 
 
 def test_listen_hears_open_and_closed_surfaces():
-    from vrecho.listen import listen
+    from vrecho.sim.listening import listen
 
     levels = {}
     for o in listen(builtin_scene(), progress=False):

@@ -5,8 +5,11 @@ import pytest
 
 from conftest import small_room
 from vrecho.errors import VrechoError
-from vrecho.headset_view import HEADSET_CAMERA, load_model, look, make_dataset, pane_crop, save, train
-from vrecho.render import World, camera_pose, render_view
+from vrecho.sim.walks import HEADSET_CAMERA
+from vrecho.headset.view import load_model, look, pane_crop, save
+from vrecho.learn.headset_view import make_dataset, train
+from vrecho.sim.render import World, render_view
+from vrecho.camera import camera_pose
 
 
 @pytest.fixture(scope="module")

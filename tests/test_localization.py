@@ -20,8 +20,9 @@ def _sir_gain(ref, est, mix):
 @pytest.fixture(scope="module")
 def two_sources():
     """A 4.5 x 4 x 2.7 m room (RT60 0.3 s), speech and music, the headset at 8 poses on an arc."""
-    from localization.capture import FS, AmbientSource, Shoebox, simulate_walk_capture
-    from localization.sounds import ambient_sound
+    from localization.capture import FS
+    from vrecho.sim.ambient import AmbientSource, Shoebox, simulate_walk_capture
+    from vrecho.sim.sounds import ambient_sound
     from vrecho.scene import DevicePose
 
     rng = np.random.default_rng(3)
@@ -86,16 +87,17 @@ def test_mask_network(two_sources, tmp_path):
     owns every bin; a tiny training run writes weights the shipped network's shape."""
     import torch
 
-    from localization.masknet import FS, NFFT, WEIGHTS, source_masks, train
-    from localization.separate import _stft, steering
+    from localization.masknet import FS, NFFT, WEIGHTS, source_masks
+    from vrecho.learn.masknet import train
+    from localization.separate import analysis, steering
 
     _, sim = two_sources
     cap = sim.captures[4]
-    X = _stft(cap.audio, NFFT)
+    X = analysis(cap.audio, NFFT)
     A = steering(cap, np.array([s.position for s in sim.sources]), np.fft.rfftfreq(NFFT, 1 / FS))
     share = source_masks(X, A)
     assert share.shape == X.shape[:2] + (2,) and share.min() >= 0 and share.max() <= 1
-    power = np.stack([np.abs(_stft(im[:1], NFFT)[..., 0]) ** 2 for im in sim.images[4]], axis=-1)
+    power = np.stack([np.abs(analysis(im[:1], NFFT)[..., 0]) ** 2 for im in sim.images[4]], axis=-1)
     louder = power[..., 0] > 10 * power[..., 1]
     quieter = power[..., 1] > 10 * power[..., 0]
     assert share[..., 0][louder].mean() > share[..., 0][quieter].mean() + 0.3
@@ -171,7 +173,7 @@ def test_bad_input():
 
 
 def test_sounds():
-    from localization.sounds import KINDS, ambient_sound
+    from vrecho.sim.sounds import KINDS, ambient_sound
 
     for kind in KINDS + ("clap",):
         a = ambient_sound(kind, 1.0, 16000, np.random.default_rng(1))

@@ -52,7 +52,7 @@ def test_bad_variant():
 @pytest.mark.parametrize("kind", ["knn", "svm"])
 def test_classical_baselines_share_the_heads(kind):
     from vrecho.models import FeatureBaseline
-    from vrecho.train import metrics
+    from vrecho.learn.train import metrics
 
     g = torch.Generator().manual_seed(0)
     n = 200

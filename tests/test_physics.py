@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from vrecho.acoustics import (SPEED_OF_SOUND, device_direct_amplitude, device_impulse_response, echo_delay_s,
-                              record_pulse)
+from vrecho.sim.acoustics import SPEED_OF_SOUND, device_direct_amplitude, device_impulse_response, echo_delay_s, record_pulse
 from vrecho.features import echo_response
-from vrecho.scene import Discontinuity, Material, Room, Scene, WINDOW_GLASS, face
+from vrecho.scene import WINDOW_GLASS, Discontinuity, Material, Room, Scene
+from vrecho.sim.scenes import face
 from vrecho.signals import FS, probe
 
 # A room large enough that no floor, ceiling or side-wall echo shares the window of the echo
@@ -33,7 +33,7 @@ def _peak_time(h: np.ndarray, lo: int, hi: int) -> float:
 @pytest.mark.parametrize("depth", DEPTHS_M)
 def test_echo_delay_and_opening_energy(depth, tmp_path):
     from vrecho.features import echo_at
-    from vrecho.reconstruct import ECHO_CLOSED_DB
+    from vrecho.reconstruct.decide import ECHO_CLOSED_DB
 
     sound = probe()
     energies, levels = {}, {}
@@ -65,7 +65,7 @@ def test_echo_delay_and_opening_energy(depth, tmp_path):
 
 
 def test_headset_array_hears_each_microphone_at_its_distance(tmp_path):
-    from vrecho.acoustics import impulse_responses
+    from vrecho.sim.acoustics import impulse_responses
     from vrecho.scene import MIC_ARRAYS
 
     scene = _scene("glass")

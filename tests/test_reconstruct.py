@@ -6,8 +6,9 @@ from scipy.spatial import cKDTree
 
 import vrecho
 from vrecho.errors import VrechoError
-from vrecho.reconstruct import fuse, walkthrough
-from vrecho.render import Camera
+from vrecho.reconstruct import fuse
+from vrecho.sim.scans import walkthrough
+from vrecho.camera import Camera
 
 from conftest import small_room
 
@@ -66,7 +67,7 @@ def test_walkthrough_needs_a_path():
 
 
 def test_fusion_skips_frames_without_depth_and_says_when_none_has_any(scan):
-    from vrecho.render import View
+    from vrecho.camera import View
 
     scene, vertices, views = scan
     blank = View(np.zeros_like(views[0].gray), np.zeros_like(views[0].depth), views[0].intrinsics, views[0].pose)
@@ -115,15 +116,18 @@ def test_geometry_beyond_the_walls_is_found(scan):
 
 @pytest.fixture(scope="module")
 def small():
-    from vrecho.reconstruct import reconstruct, scan_scene
+    from vrecho.reconstruct import reconstruct
+    from vrecho.sim.scans import hear_echoes, scan_scene
 
     scene = small_room()
     scan = scan_scene(scene, 36, Camera(200, 150), voxel_m=0.04)
-    return scene, scan, reconstruct(scan, scene, "echocnn")
+    result = reconstruct(scan, hear=hear_echoes(scene), decide="echocnn")
+    assert scan.echoes is None and result.scan.echoes is not None  # the scan given is not changed
+    return scene, scan, result
 
 
 def _decision_of(scene, result, kind):
-    from vrecho.reconstruct import match_truth
+    from vrecho.sim.scoring import match_truth
 
     k = next(i for i, d in enumerate(scene.discontinuities) if d.kind == kind)
     found = [j for j, h in enumerate(result.holes) if match_truth(scene, h) == k]
@@ -141,7 +145,7 @@ def test_the_window_is_filled_at_the_right_depth(small):
 
 
 def test_the_mirror_is_filled_and_its_phantom_room_is_gone(small):
-    from vrecho.scan_metrics import phantom_area_m2
+    from vrecho.sim.scoring import phantom_area_m2
 
     scene, scan, result = small
     _, decision, action = _decision_of(scene, result, "mirror")
@@ -158,8 +162,9 @@ def test_the_opening_stays_open(small):
 
 
 def test_metrics_rank_the_repair_above_no_repair_and_per_vertex_works(small):
-    from vrecho.reconstruct import oracle, repair
-    from vrecho.scan_metrics import score
+    from vrecho.sim.scoring import oracle
+    from vrecho.reconstruct import repair
+    from vrecho.sim.scoring import score
 
     scene, scan, result = small
     none = score(scene, scan.mesh, scan.mesh)
@@ -175,7 +180,8 @@ def test_metrics_rank_the_repair_above_no_repair_and_per_vertex_works(small):
 def test_a_scan_folder_round_trips_and_bad_ones_say_why(small, tmp_path):
     from vrecho.reconstruct import Echoes, load_scan
 
-    scene, scan, result = small
+    scene, _, result = small
+    scan = result.scan  # with what the device heard
     scan.save(tmp_path / "scan")
     back = load_scan(tmp_path / "scan")
     assert len(back.views) == len(scan.views) and len(back.mesh.triangles) == len(scan.mesh.triangles)

@@ -2,8 +2,10 @@ import numpy as np
 import pytest
 
 from vrecho.errors import VrechoError
-from vrecho.render import Camera, World, camera_pose, crop, render_view
-from vrecho.scene import builtin_scene, face
+from vrecho.camera import Camera, camera_pose
+from vrecho.sim.render import World, crop, render_view
+from vrecho.scene import builtin_scene
+from vrecho.sim.scenes import face
 
 CAM = Camera(64, 48, 50.0)
 
@@ -62,7 +64,7 @@ def test_crop_needs_a_discontinuity(world):
 
 
 def test_a_crop_from_a_camera_frame_matches_the_ray_traced_crop():
-    from vrecho.render import crop_view
+    from vrecho.camera import crop_view
 
     scene = builtin_scene()
     world = World(scene)

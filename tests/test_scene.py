@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from vrecho.errors import VrechoError
-from vrecho.scene import (DEPTH_RANGE_M, MAX_INCIDENCE_DEG, MIC_ABOVE_EMITTER_M, Scene, builtin_scene, face,
-                          load_scene, random_scene, walkthrough_path)
+from vrecho.scene import DEPTH_RANGE_M, MAX_INCIDENCE_DEG, MIC_ABOVE_EMITTER_M, Scene, builtin_scene, load_scene
+from vrecho.sim.scenes import face, random_scene, walkthrough_path
 
 
 def test_json_round_trip_is_exact(tmp_path):

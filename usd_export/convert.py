@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
+
+from localization import PlacedSource
+from vrecho.errors import VrechoError
+from vrecho.signals import FS, emitted_sound, pulse_train
 
 from .stage import LabeledSurface
 
@@ -47,9 +54,6 @@ def sources_from_scene(scene, seconds: int = 10) -> list:
     """The scene's own sound sources at their true positions, each playing its sound (PROTOCOL's
     100 ms sound once a second, at the source's gain): the truth, standing in where no
     localization ran (``vrecho export --sources truth``)."""
-    from localization import PlacedSource
-    from vrecho.signals import FS, emitted_sound, pulse_train
-
     out = []
     for k, s in enumerate(scene.sources):
         signal = pulse_train(emitted_sound(s.sound, FS, np.random.default_rng(k)), seconds) * 10 ** (s.gain_db / 20)
@@ -60,12 +64,6 @@ def sources_from_scene(scene, seconds: int = 10) -> list:
 def sources_from_json(path) -> list:
     """Placed sources listed in a JSON file: ``[{"name", "position": [x, y, z] (metres, Z up),
     "wav": path (relative to the file), "confidence"?, "uncertainty_m"?}, ...]``."""
-    import json
-    from pathlib import Path
-
-    from localization import PlacedSource
-    from vrecho.errors import VrechoError
-
     path = Path(path)
     try:
         items = json.loads(path.read_text())

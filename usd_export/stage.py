@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import soundfile as sf
 
 from vrecho.errors import VrechoError
 from vrecho.reconstruct import SURFACE_COLOURS
@@ -122,8 +123,6 @@ def _check_surface(s: LabeledSurface, i: int) -> None:
 
 def _source_audio(s, i: int) -> tuple[np.ndarray, int]:
     """A source's signal (float, at most 1 channel) and rate, read from its WAV if it names one."""
-    import soundfile as sf
-
     where = f"sources[{i}] ({getattr(s, 'name', '?')})"
     pos = np.asarray(s.position, float)
     if pos.shape != (3,) or not np.all(np.isfinite(pos)):
@@ -178,7 +177,7 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 def _materials(stage, root: str) -> dict:
-    from pxr import Gf, Sdf, UsdShade
+    from pxr import Gf, Sdf, UsdShade  # OpenUSD: only when a stage is written or read
 
     out = {}
     specs = {  # NOTES.md: glass and mirror as UsdPreviewSurface describes them
@@ -207,13 +206,13 @@ def _materials(stage, root: str) -> dict:
 
 
 def _bind(prim, material) -> None:
-    from pxr import UsdShade
+    from pxr import UsdShade  # OpenUSD: only when a stage is written or read
 
     UsdShade.MaterialBindingAPI.Apply(prim).Bind(material)
 
 
 def _mesh(stage, path: str, vertices, faces_counts, faces_indices, normals, normal_interp, colours, colour_interp):
-    from pxr import UsdGeom, Vt
+    from pxr import UsdGeom, Vt  # OpenUSD: only when a stage is written or read
 
     mesh = UsdGeom.Mesh.Define(stage, path)
     pts = y_up(vertices).astype(np.float32)
@@ -232,8 +231,7 @@ def _mesh(stage, path: str, vertices, faces_counts, faces_indices, normals, norm
 
 
 def _write_stage(stage_path: Path, audio_dir: Path, vertices, faces, colours, surfaces, sources, audio) -> None:
-    import soundfile as sf
-    from pxr import Gf, Sdf, Usd, UsdGeom, UsdMedia
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdMedia  # OpenUSD: only when a stage is written or read
 
     stage = Usd.Stage.CreateNew(str(stage_path))
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
@@ -355,7 +353,7 @@ def write_scene(path: str | Path, mesh, surfaces=(), sources=(), check: bool = T
             audio_dir.mkdir()
         _write_stage(stage_path, audio_dir, vertices, faces, colours, surfaces, sources, audio)
         if package:
-            from pxr import Sdf, UsdUtils
+            from pxr import Sdf, UsdUtils  # OpenUSD: only when a stage is written or read
 
             built = tmp / path.name
             if not UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(stage_path)), str(built)):
@@ -389,7 +387,7 @@ def validate(path: str | Path) -> list[Problem]:
     bindings, shader compliance, usdz packaging, ...) over the stage at ``path``, and vrecho's
     check that every audio file a ``SpatialAudio`` prim names resolves. Returns the problems
     (empty when the stage is clean)."""
-    from pxr import Usd, UsdMedia, UsdValidation
+    from pxr import Usd, UsdMedia, UsdValidation  # OpenUSD: only when a stage is written or read
 
     path = Path(path)
     if not path.is_file():

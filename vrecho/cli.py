@@ -1,4 +1,5 @@
-"""The ``vrecho`` command.
+"""The ``vrecho`` command: its arguments (argparse), and one call into :mod:`vrecho.app` per
+subcommand.
 
 Bad input ends with one line on stderr (``vrecho: error: ...``) and exit status 2; an interrupt
 with status 130, keeping whatever was finished.
@@ -10,131 +11,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from . import app
+from .app.scans import LABEL_CHOICES
 from .errors import VrechoError
-
-
-def _generate(args) -> int:
-    from .data import generate, open_dataset
-
-    out = generate(args.out, args.preset, args.seed, args.workers, args.cache, progress=not args.quiet)
-    ds = open_dataset(out)
-    m = ds.manifest
-    print(f"{out}: {len(ds)} frames ({int(ds.mask(kind='echo').sum())} echo, {int(ds.mask(kind='source').sum())} "
-          f"source) from {m['n_irs']} impulse responses in {m['preset_settings']['n_scenes']} rooms")
-    for split in ("train", "val", "test"):
-        print(f"  {split:5s}: {int(ds.mask(split).sum()):6d} echo frames, paper protocol {int(ds.paper_split(split).sum()):6d}")
-    return 0
-
-
-def _train(args) -> int:
-    from .evaluate import train_methods
-
-    records = train_methods(args.data, args.out, args.method, args.seed, args.epochs, args.patience,
-                            progress=not args.quiet)
-    for name, r in records.items():
-        extra = f", {r['epochs']} epochs (best {r['best_epoch'] + 1})" if "epochs" in r else ""
-        print(f"{name:18s} {r['protocol']:7s} {r['n_train']:6d} train frames, {r['seconds']:7.1f} s{extra}")
-    if (args.out / "classifier.pt").exists():
-        print(f"classifier: {args.out / 'classifier.pt'} (vrecho.load_classifier(path) loads it)")
-    return 0
-
-
-def _evaluate(args) -> int:
-    from .evaluate import evaluate
-
-    out = args.run / "evaluation" if args.out is None else args.out
-    evaluate(args.data, args.run, out, args.seed, progress=not args.quiet, methods=args.method)
-    print((out / "tables.md").read_text())
-    print(f"written to {out}: tables.md, results.csv, metrics.json, confusion_*.png, "
-          "activation_maximisation_depth.png")
-    return 0
-
-
-def _reconstruct(args) -> int:
-    from .reconstruct import run, summary
-
-    result = run(args.scene, args.out, args.labels, args.variant, args.frames, args.seed, args.save_scan,
-                 progress=not args.quiet)
-    print(summary(result))
-    s = result.seconds
-    print(f"{len(result.surfaces)} surfaces added; discontinuities and repair {s['total_without_simulation']:.1f} s")
-    print(f"written to {args.out}: initial.ply, repaired.ply, report.json, before_after.png"
-          + (", scan/" if args.save_scan else ""))
-    return 0
-
-
-def _export(args) -> int:
-    import usd_export
-
-    from .reconstruct import open_source, reconstruct
-
-    usd_export.check_target(args.out)  # before the work, not after
-    if args.sources not in ("none", "truth", "heard") and not Path(args.sources).is_file():
-        raise VrechoError(f"sources: expected 'none', 'truth', 'heard' or a JSON file, got {args.sources!r}")
-    scan, scene = open_source(args.scene, args.frames, progress=not args.quiet)
-    if args.sources in ("truth", "heard") and scene is None:
-        raise VrechoError(f"sources: {args.sources!r} needs a scene (builtin or a scene JSON), not a scan folder")
-    result = reconstruct(scan, scene, args.labels, args.variant, seed=args.seed, progress=not args.quiet)
-    room, surfaces = usd_export.from_reconstruction(result)
-    sources = {"none": lambda: [], "truth": lambda: usd_export.sources_from_scene(scene),
-               "heard": lambda: _heard(scene, args.seed, not args.quiet)}.get(
-        args.sources, lambda: usd_export.sources_from_json(args.sources))()
-    path = usd_export.write_scene(args.out, room, surfaces, sources)  # refuses a stage with validation errors
-    problems = usd_export.validate(path)  # the file as it lies now, and its warnings for the user
-    errors = [p for p in problems if p.severity == "error"]
-    if errors:
-        raise VrechoError(f"export: {path} has {len(errors)} validation error(s); first: {errors[0]}")
-    for p in problems:
-        print(f"  {p}")
-    print(f"{path}: {len(room[1]):,} room triangles, {len(surfaces)} surfaces "
-          f"({', '.join(f'{s.name} {s.state}' for s in surfaces) or 'none'}), {len(sources)} sound sources; "
-          f"OpenUSD's validators: no errors, {len(problems)} other findings")
-    return 0
-
-
-def _heard(scene, seed: int, progress: bool) -> list:
-    """The scene's sources heard by the headset along its walkthrough, located and separated."""
-    import numpy as np
-
-    import localization
-
-    sim = localization.hear_scene(scene, np.random.default_rng(seed))
-    placed = localization.place_sources(sim.captures, bounds=scene.room.box, progress=progress)
-    for p in placed:
-        err = min(np.linalg.norm(p.position - s.position) for s in sim.sources)
-        print(f"  {p.name} at {np.round(p.position, 2).tolist()} m (+/- {p.uncertainty_m or float('nan'):.2f} m, "
-              f"confidence {p.confidence:.2f}); nearest true source {err:.2f} m away")
-    return placed
-
-
-def _capture(args) -> int:
-    from .capture import run
-
-    done = run(args.out, args.video, args.audio, args.images, args.poses, args.mesh, args.image_fps, args.labels,
-               args.emitter_distance, progress=not args.quiet)
-    rows, result = done["rows"], done["result"]
-    n_open = sum(r["open"] for r in rows)
-    print(f"{len(rows)} frames: {n_open} open, {len(rows) - n_open} closed "
-          f"({sum(r['material'] == 'mirror' for r in rows)} mirror)")
-    files = "frames.csv, capture.png" + (", images.npz" if args.video or args.images else "")
-    if result is not None:
-        from .reconstruct import summary
-
-        posed = sum("x_m" in r for r in rows)
-        print(f"{posed} frames posed; {len(result.holes)} holes in the mesh, {len(result.surfaces)} surfaces added")
-        if result.holes:
-            print(summary(result))
-        files += ", initial.ply, repaired.ply, report.json, before_after.png, scan/ (vrecho export takes it)"
-    print(f"written to {args.out}: {files}")
-    return 0
-
-
-def _demo(args) -> int:
-    import demo
-
-    demo.run(args.out, args.scene, args.html, browser=not args.no_browser, seed=args.seed, serve=args.serve,
-             progress=not args.quiet)
-    return 0
+from .reconstruct import LABELS, VARIANTS
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -150,7 +30,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--workers", type=int, default=None, help="processes (default: one per core)")
     g.add_argument("--cache", type=Path, default=None, help="impulse-response cache folder (default: ~/.cache/vrecho/ir)")
     g.add_argument("--quiet", action="store_true", help="no progress bar")
-    g.set_defaults(func=_generate)
+    g.set_defaults(func=lambda a: app.generate(a.out, preset=a.preset, seed=a.seed, workers=a.workers,
+                                                cache=a.cache, progress=not a.quiet))
 
     t = sub.add_parser("train", help="train EchoCNN and every baseline on a dataset",
                        description="Train every method of the benchmark (EchoCNN variants and baselines) on a dataset "
@@ -163,7 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--epochs", type=int, default=40, help="most epochs per model (default: 40)")
     t.add_argument("--patience", type=int, default=6, help="epochs without improvement before stopping (default: 6)")
     t.add_argument("--quiet", action="store_true", help="no progress bars")
-    t.set_defaults(func=_train)
+    t.set_defaults(func=lambda a: app.train(a.data, a.out, methods=a.method, seed=a.seed, epochs=a.epochs,
+                                             patience=a.patience, progress=not a.quiet))
 
     e = sub.add_parser("evaluate", help="the paper's tables for every trained method",
                        description="Judge every method trained in RUN on the test rooms: the paper's two tables "
@@ -175,7 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--method", action="append", default=None, help="evaluate only this method (repeatable)")
     e.add_argument("--seed", type=int, default=0, help="seed of the product protocol's probes (default: 0)")
     e.add_argument("--quiet", action="store_true", help="no progress bars")
-    e.set_defaults(func=_evaluate)
+    e.set_defaults(func=lambda a: app.evaluate(a.data, a.run, a.out, methods=a.method, seed=a.seed,
+                                                progress=not a.quiet))
 
     r = sub.add_parser("reconstruct", help="scan a scene, find its glass, mirrors and openings, and repair the scan",
                        description="The initial reconstruction (a walkthrough fused by TSDF, with the camera's glass and "
@@ -184,16 +67,18 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("scene", help="'builtin' (the living room), a scene JSON file, or a scan folder (frames.npz, "
                                  "optional mesh.ply and echoes.npz; see vrecho.reconstruct.load_scan)")
     r.add_argument("--out", required=True, type=Path, help="output folder")
-    r.add_argument("--labels", choices=("echocnn", "echocnn-only", "oracle"), default="echocnn",
+    r.add_argument("--labels", choices=LABEL_CHOICES, default="echocnn",
                    help="who decides what each hole is: EchoCNN with the scan's evidence (default), EchoCNN alone, "
                         "or the scene's truth")
-    r.add_argument("--variant", choices=("simplified", "per_vertex"), default="simplified",
+    r.add_argument("--variant", choices=VARIANTS, default="simplified",
                    help="Algorithm 1's fill: a new convex face, or the scan's own rim vertices moved (default: simplified)")
     r.add_argument("--frames", type=int, default=60, help="walkthrough frames of a simulated scan (default: 60)")
     r.add_argument("--seed", type=int, default=0, help="seed of the simulated recordings (default: 0)")
     r.add_argument("--save-scan", action="store_true", help="also write the scan (OUT/scan, the scan-folder format)")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
-    r.set_defaults(func=_reconstruct)
+    r.set_defaults(func=lambda a: app.reconstruct(a.scene, a.out, labels=a.labels, variant=a.variant,
+                                                   n_frames=a.frames, seed=a.seed, save_scan=a.save_scan,
+                                                   progress=not a.quiet))
 
     x = sub.add_parser("export", help="reconstruct and repair a scene, and write it as OpenUSD (.usda/.usdc/.usdz)",
                        description="The repaired room as an OpenUSD stage: the mesh, each glass, mirror and opening "
@@ -202,9 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "report an error; a failed export writes nothing.")
     x.add_argument("scene", help="'builtin', a scene JSON file, or a scan folder (as for reconstruct)")
     x.add_argument("--out", required=True, type=Path, help="the stage: a .usda, .usdc, .usd or .usdz path")
-    x.add_argument("--labels", choices=("echocnn", "echocnn-only", "oracle"), default="echocnn",
+    x.add_argument("--labels", choices=LABEL_CHOICES, default="echocnn",
                    help="who decides what each hole is (as for reconstruct; default: echocnn)")
-    x.add_argument("--variant", choices=("simplified", "per_vertex"), default="simplified",
+    x.add_argument("--variant", choices=VARIANTS, default="simplified",
                    help="Algorithm 1's fill (default: simplified)")
     x.add_argument("--sources", default="none",
                    help="sound sources: 'none' (default), 'truth' (a scene's own sources where they are), "
@@ -214,7 +99,8 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--frames", type=int, default=60, help="walkthrough frames of a simulated scan (default: 60)")
     x.add_argument("--seed", type=int, default=0, help="seed of the simulated recordings (default: 0)")
     x.add_argument("--quiet", action="store_true", help="no progress bars")
-    x.set_defaults(func=_export)
+    x.set_defaults(func=lambda a: app.export(a.scene, a.out, labels=a.labels, variant=a.variant, sources=a.sources,
+                                              n_frames=a.frames, seed=a.seed, progress=not a.quiet))
 
     c = sub.add_parser("capture", help="a phone's capture (video, or sound file): pulses, frames, EchoCNN's answers, "
                                        "and the repair of its mesh",
@@ -235,14 +121,16 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--poses", type=Path, default=None,
                    help="a folder with COLMAP's text model of the pictures (cameras.txt, images.txt): metric, z up")
     c.add_argument("--mesh", type=Path, default=None, help="with --poses: the scan's mesh (.ply or .obj) to repair")
-    c.add_argument("--labels", choices=("echocnn", "echocnn-only"), default="echocnn",
+    c.add_argument("--labels", choices=tuple(LABELS), default="echocnn",
                    help="who decides what each hole is (as for reconstruct; default: echocnn)")
     c.add_argument("--emitter-distance", type=float, default=None, metavar="M",
                    help="metres from the playing loudspeaker to the filming microphone (default 0.07, "
                         "PROTOCOL.md's device: the second phone held against the first)")
     c.add_argument("--out", type=Path, required=True, help="output folder")
     c.add_argument("--quiet", action="store_true", help="no progress bars")
-    c.set_defaults(func=_capture)
+    c.set_defaults(func=lambda a: app.capture(a.out, a.video, a.audio, a.images, a.poses, a.mesh,
+                                               image_fps=a.image_fps, labels=a.labels,
+                                               emitter_distance_m=a.emitter_distance, progress=not a.quiet))
 
     d = sub.add_parser("demo", help="the whole run on the built-in living room, as a meshcat walkthrough",
                        description="Simulate the built-in scene (or --scene FILE) and run all of vrecho on it: the "
@@ -258,14 +146,16 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--scene", type=Path, default=None, help="a scene JSON file instead of the built-in one")
     d.add_argument("--seed", type=int, default=0, help="seed of the simulated recordings (default: 0)")
     d.add_argument("--quiet", action="store_true", help="no progress bars or step lines (the table is printed)")
-    d.set_defaults(func=_demo)
+    d.set_defaults(func=lambda a: app.demo(a.out, scene=a.scene, html=a.html, browser=not a.no_browser,
+                                            seed=a.seed, serve=a.serve, progress=not a.quiet))
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return args.func(args)
+        args.func(args)
+        return 0
     except VrechoError as e:
         print(f"vrecho: error: {e}", file=sys.stderr)
         return 2

@@ -13,7 +13,7 @@ rather than with pycolmap (a large binary wheel for two text files):
     Two lines per image: ``IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME`` and its 2-D points
     (ignored; the line may be empty). The quaternion and translation map world to camera
     (x_cam = R x_world + t); the camera's axes are OpenCV's (x right, y down, z forward), as in
-    :class:`vrecho.render.View`.
+    :class:`vrecho.camera.View`.
 
 vrecho's world is metric with z up (PROTOCOL.md): a model from a phone's tracking (ARKit,
 ARCore, and the apps that export their poses as COLMAP text) is; a COLMAP reconstruction from
@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .errors import VrechoError
 
@@ -71,8 +72,6 @@ def _lines(path: Path) -> list[str]:
 
 def quaternion_matrix(q) -> np.ndarray:
     """Rotation matrix (3, 3) of a quaternion (w, x, y, z), normalised first."""
-    from scipy.spatial.transform import Rotation
-
     w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
     return Rotation.from_quat([x, y, z, w]).as_matrix()
 
@@ -125,8 +124,6 @@ def read_model(folder: str | Path) -> tuple[dict[int, Camera], list[Image]]:
 def write_model(folder: str | Path, camera: Camera, names: list[str], poses: np.ndarray) -> Path:
     """Write one camera and the images ``names`` at camera-to-world ``poses`` (N, 4, 4) as
     COLMAP's text model (no 2-D points): how a phone app exports its tracked poses."""
-    from scipy.spatial.transform import Rotation
-
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "cameras.txt").write_text(

@@ -15,12 +15,14 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 
+import librosa
 import numpy as np
 import scipy.fft
 import scipy.signal
 
 from .errors import VrechoError
-from .signals import FS, check_fs, parabolic_peaks
+from .scene import MIC_ABOVE_EMITTER_M
+from .signals import FS, SPEED_OF_SOUND, check_fs, parabolic_peaks
 
 N_FFT = 2048
 HOP = 512
@@ -49,8 +51,6 @@ def check_frames(audio, fs) -> np.ndarray:
     if not np.all(np.isfinite(x)):
         raise VrechoError("audio: contains NaN or infinite samples")
     if fs != FS:
-        import librosa
-
         x = librosa.resample(x, orig_sr=fs, target_sr=FS, res_type="soxr_hq", axis=-1).astype(np.float32)
         x = x[..., :FS] if x.shape[-1] >= FS else np.pad(x, [(0, 0)] * (x.ndim - 1) + [(0, FS - x.shape[-1])])
     return x
@@ -63,8 +63,6 @@ def _window() -> np.ndarray:
 
 @functools.lru_cache(maxsize=1)
 def _mel_basis() -> np.ndarray:
-    import librosa
-
     return librosa.filters.mel(sr=FS, n_fft=N_FFT, n_mels=N_MELS, fmax=FS / 2)  # built once: 2 ms a call
 
 
@@ -85,8 +83,6 @@ def check_emitted(emitted, fs, n_frames: int | None = None) -> np.ndarray:
     if np.any(np.abs(s).max(axis=-1) == 0):
         raise VrechoError("emitted: the emitted sound is silent")
     if fs != FS:
-        import librosa
-
         s = librosa.resample(s, orig_sr=fs, target_sr=FS, res_type="soxr_hq", axis=-1).astype(np.float32)
     return s
 
@@ -106,8 +102,6 @@ def logmel(audio, fs: int = FS) -> np.ndarray:
     numpy.ndarray, shape (62, 25) or (B, 62, 25), float32
         Mel bands (low to high) by time bins; each spectrogram has zero mean and unit variance.
     """
-    import librosa
-
     x = check_frames(audio, fs)
     # librosa's centred STFT (zero padding by N_FFT / 2, periodic Hann), framed by hand: the same
     # numbers in a third of the time, which is most of a prediction's budget
@@ -208,7 +202,6 @@ def echo_features(audio, emitted, fs: int = FS) -> EchoFeatures:
     return EchoFeatures(envelope.astype(np.float32), np.maximum(db, -120).astype(np.float32))
 
 
-
 def echo_at(audio, emitted, depth_m: float, fs: int = FS, window_m: float = 0.03) -> tuple[float, float]:
     """The echo of a plane expected ``depth_m`` in front of the emitter (say, a wall seen by the
     camera): its level and its measured depth.
@@ -224,9 +217,7 @@ def echo_at(audio, emitted, depth_m: float, fs: int = FS, window_m: float = 0.03
     level_db : float
     depth_m : float
     """
-    from .scene import MIC_ABOVE_EMITTER_M
-
-    c = 343.0
+    c = SPEED_OF_SOUND
     h = np.abs(echo_response(audio, emitted, fs, 0.03)).astype(np.float64)
     direct = int(np.argmax(h[:int(0.002 * FS)]))
 

@@ -54,7 +54,7 @@ def atomic_save_npy(path: str | Path, array: np.ndarray) -> Path:
 
 def read_mesh(path: str | Path):
     """A user's triangle mesh (.ply or .obj) with open3d; one error if it is not one."""
-    import open3d as o3d
+    import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 
     path = Path(path)
     if path.suffix.lower() not in (".ply", ".obj"):

@@ -12,9 +12,13 @@ Every variant has the same heads, so one training loop and one table serve them 
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import nn
 from torch.nn import functional as F
+
+from .scene import MIC_ABOVE_EMITTER_M
+from .signals import FS, SPEED_OF_SOUND
 
 DEPTH_BINS_M = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
 """Synthetic-table depth classes: centres 0.5 m apart, each +/- 0.25 m."""
@@ -30,6 +34,8 @@ HEADS = {"open": 2, "material": 2, "depth_bin": len(DEPTH_BINS_M), "depth_ft": l
 """Output size of each head: open/closed, glass/mirror, the two depth classings, depth in metres,
 the source's 0.5 m grid cell (one softmax per axis, concatenated) and its position in metres."""
 CLASS_HEADS = ("open", "material", "depth_bin", "depth_ft")
+IGNORE = -100
+"""The class target of a head that does not apply to a frame (torch's ``ignore_index``)."""
 
 
 class AudioBranch(nn.Module):
@@ -65,11 +71,6 @@ class ImageBranch(nn.Module):
         return F.relu(self.fc(torch.flatten(x, 1)))
 
 
-SPEED_OF_SOUND = 343.0
-MIC_OFFSET_M = 0.07
-ECHO_FS = 44100
-
-
 class EchoBranch(nn.Module):
     """The recovered impulse response, read the way physics says: where is the echo?
 
@@ -95,9 +96,9 @@ class EchoBranch(nn.Module):
         # Scores start as the envelope itself, sharpened: the attention begins as peak picking
         # (the strongest echo past the direct sound) and learns what to discount.
         self.sharpness = nn.Parameter(torch.tensor(40.0))
-        t = (torch.arange(length // 2) * 2 + 0.5) / ECHO_FS  # delay at each step's centre
+        t = (torch.arange(length // 2) * 2 + 0.5) / FS  # delay at each step's centre
         path = SPEED_OF_SOUND * t  # emitter -> surface -> microphone
-        self.register_buffer("depth_at", torch.sqrt(torch.clamp(path ** 2 - MIC_OFFSET_M ** 2, min=0)) / 2)
+        self.register_buffer("depth_at", torch.sqrt(torch.clamp(path ** 2 - MIC_ABOVE_EMITTER_M ** 2, min=0)) / 2)
         self.register_buffer("valid", self.depth_at >= 0.15)
         self.fc_bands = nn.Linear(7 * 20, hidden // 2)
         self.fc = nn.Linear(3 * channels + 2, hidden)
@@ -105,7 +106,7 @@ class EchoBranch(nn.Module):
 
     def forward(self, envelope: torch.Tensor, bands: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Features (B, out_features), depth (B,) in metres, and the delay scores (B, steps), which
-        training holds against the true echo delay (see :func:`vrecho.train.loss_fn`)."""
+        training holds against the true echo delay (see :func:`vrecho.learn.train.loss_fn`)."""
         x = torch.log10(envelope.clamp_min(1e-4))[:, None] / 4.0  # 80 dB of range to [-1, 0]
         h = F.relu(self.stem(x))
         for conv, norm in zip(self.convs, self.norms):
@@ -280,14 +281,13 @@ class FeatureBaseline:
         self.kind, self.inputs, self.n_neighbors, self.C = kind, tuple(inputs), n_neighbors, C
 
     def _features(self, x: dict):
-        import numpy as np
-
         return np.concatenate([np.asarray(x[k], dtype=np.float32).reshape(len(x[k]), -1) for k in self.inputs], axis=1)
 
     def _estimator(self, regression: bool):
-        from sklearn.multioutput import MultiOutputRegressor
-        from sklearn.neighbors import KNeighborsClassifier, KNeighborsRegressor
-        from sklearn.svm import LinearSVC, LinearSVR
+        # scikit-learn is heavy (1.7 s to import): only the baselines need it
+        from sklearn.multioutput import MultiOutputRegressor  # heavy (1.7 s to import): only the baselines need it
+        from sklearn.neighbors import KNeighborsClassifier, KNeighborsRegressor  # heavy (1.7 s to import): only the baselines need it
+        from sklearn.svm import LinearSVC, LinearSVR  # heavy (1.7 s to import): only the baselines need it
 
         if self.kind == "knn":
             return KNeighborsRegressor(self.n_neighbors) if regression else KNeighborsClassifier(self.n_neighbors)
@@ -297,12 +297,10 @@ class FeatureBaseline:
         return LinearSVC(C=self.C, dual=False)
 
     def fit(self, x: dict, y: dict) -> "FeatureBaseline":
-        import numpy as np
-        from sklearn.dummy import DummyClassifier
-        from sklearn.pipeline import make_pipeline
-        from sklearn.preprocessing import StandardScaler
-
-        from .train import IGNORE
+        # scikit-learn is heavy (1.7 s to import): only the baselines need it
+        from sklearn.dummy import DummyClassifier  # heavy (1.7 s to import): only the baselines need it
+        from sklearn.pipeline import make_pipeline  # heavy (1.7 s to import): only the baselines need it
+        from sklearn.preprocessing import StandardScaler  # heavy (1.7 s to import): only the baselines need it
 
         X = self._features(x)
         self.models_ = {}
@@ -328,8 +326,6 @@ class FeatureBaseline:
         return self
 
     def predict(self, x: dict) -> dict:
-        import numpy as np
-
         X = self._features(x)
         n = len(X)
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.signal
+from scipy import fft
 
 from .errors import VrechoError
 
@@ -31,6 +32,8 @@ TRAIN_SOUNDS: tuple[str, ...] = tuple(f"tone_{f}" for f in TONES_HZ) + (
 """The paper's training sounds: nine tones, clap, pink and brown noise."""
 HELD_OUT_SOUNDS: tuple[str, ...] = ("voice", "whistle", "chirp", "white_noise")
 """The paper's "unheard" test sounds."""
+SPEED_OF_SOUND = 343.0
+"""m/s; pyroomacoustics' default, used by the simulator and by every echo-delay computation."""
 
 
 def check_fs(fs) -> int:
@@ -204,8 +207,6 @@ def analytic_filter(sound: np.ndarray, n: int) -> np.ndarray:
     (n // 2 + 1 bins) doubled on the positive frequencies, so that one inverse FFT of a
     recording's spectrum times it (:func:`analytic_envelope`) gives the correlation and its
     Hilbert pair at once."""
-    from scipy import fft
-
     half = np.conj(fft.rfft(sound, n))
     half[1:(n + 1) // 2] *= 2.0
     return half
@@ -215,8 +216,6 @@ def analytic_envelope(x: np.ndarray, kernel: np.ndarray, n: int) -> np.ndarray:
     """Envelope (n,) of ``x`` correlated with the sound behind ``kernel`` (:func:`analytic_filter`
     for the same ``n``, at least len(x) + the sound's length): at lag ``l``, how much of the
     sound starts at sample ``l``. Single-precision inputs give a single-precision answer."""
-    from scipy import fft
-
     half = fft.rfft(x, n) * kernel
     spec = np.zeros(n, half.dtype)
     spec[:half.size] = half

@@ -13,13 +13,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import torch
+import torch  # this module trains models: torch is what it is for
 from torch.nn import functional as F
+from tqdm import tqdm
 
-from .errors import VrechoError
-from .models import CLASS_HEADS, DEPTH_BINS_M, DEPTH_FT_M, SRC_CELL_M, SRC_CELLS, SRC_GRID_M, EchoCNN
-
-IGNORE = -100
+from ..errors import VrechoError
+from ..models import CLASS_HEADS, DEPTH_BINS_M, DEPTH_FT_M, IGNORE, SRC_CELL_M, SRC_CELLS, SRC_GRID_M, EchoCNN
 
 
 def targets(labels: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, torch.Tensor]:
@@ -108,8 +107,6 @@ def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, 
     epoch's shuffling and dropout are seeded by ``(seed, epoch)``. A checkpoint that stopped early
     just loads its best weights; one that ran out of epochs goes on if given more.
     """
-    from tqdm import tqdm
-
     n = len(next(iter(y_train.values())))
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     state = {"epoch": 0, "best": float("inf"), "best_epoch": -1, "since": 0, "seconds": 0.0, "stopped": False,

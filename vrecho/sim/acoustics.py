@@ -12,7 +12,8 @@ pyroomacoustics' cardioid family) in the image-source part; the microphone is om
 
 Recordings follow PROTOCOL.md: a frame is 1 s of microphone signal from the pulse onset, in the
 steady state of the pulse train (the previous pulses' tails fold into the frame), plus pink
-background noise 20 to 40 dB below the direct sound and white microphone self-noise.
+background noise 20 to 40 dB below the direct sound and white microphone self-noise
+(:func:`recording_conditions`).
 """
 
 from __future__ import annotations
@@ -26,15 +27,19 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import VrechoError
-from .io import atomic_save_npy
-from .scene import BANDS_HZ, DevicePose, MicArray, Scene
-from .signals import FS, check_fs, colored_noise
+from ..errors import VrechoError
+from ..io import atomic_save_npy
+from ..scene import BANDS_HZ, DevicePose, MicArray, Scene
+from ..signals import FS, SPEED_OF_SOUND, check_fs, colored_noise
+
+__all__ = ["DEFAULT_SIMULATION", "MIC_SENSITIVITY", "SPEED_OF_SOUND", "Simulation", "build_room",
+           "default_cache_dir", "device_direct_amplitude", "device_impulse_response", "direct_amplitude",
+           "echo_delay_s", "emitter_directivity", "impulse_responses", "record_pulse", "record_source",
+           "recording_conditions", "through_microphone"]
+
 
 MIC_SENSITIVITY = 0.05
 """Microphone gain: the direct sound of a 0.8-peak pulse 7 cm away peaks near 0.57 full scale."""
-SPEED_OF_SOUND = 343.0
-"""m/s; pyroomacoustics' default, used by the simulator and by every echo-delay computation."""
 
 
 @dataclass(frozen=True)
@@ -57,7 +62,7 @@ def default_cache_dir() -> Path:
 
 
 def _octave_bands(fs: int):
-    import pyroomacoustics as pra
+    import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
 
     return pra.acoustics.OctaveBandsFactory(fs=fs, n_fft=512, keep_dc=True, base_frequency=BANDS_HZ[0])
 
@@ -65,7 +70,7 @@ def _octave_bands(fs: int):
 def build_room(scene: Scene, fs: int = FS, sim: Simulation = DEFAULT_SIMULATION):
     """A ``pyroomacoustics.Room`` of the scene's patches, each with its own frequency-dependent
     material (resampled to the simulator's bands so every wall has the same ones)."""
-    import pyroomacoustics as pra
+    import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
 
     fs = check_fs(fs)
     bands = _octave_bands(fs)
@@ -99,8 +104,8 @@ def _dense_tail():
     constant 10 000 per second from t0: every bin holds about 40, and the histogram's energy is
     spread as it should be.
     """
-    from pyroomacoustics import random as pra_random
-    from pyroomacoustics.simulation import rt
+    from pyroomacoustics import random as pra_random  # heavy (1.4 s to import): only where it simulates or analyses
+    from pyroomacoustics.simulation import rt  # heavy (1.4 s to import): only where it simulates or analyses
 
     original = rt.poisson_sequence
 
@@ -120,7 +125,7 @@ def _dense_tail():
 
 def _cache_key(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: int, sim: Simulation,
                facing: np.ndarray | None) -> str:
-    import pyroomacoustics as pra
+    import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
 
     d = scene.to_dict()
     payload = {"room": d["room"], "discontinuities": d["discontinuities"], "source": np.round(source, 6).tolist(),
@@ -158,7 +163,7 @@ def impulse_responses(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: in
         Sample 0 is the emission instant; the tail beyond ``length_s`` is folded in modulo the
         length, as in the steady state of a pulse train with that period.
     """
-    import pyroomacoustics as pra
+    import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
 
     fs = check_fs(fs)
     source = np.asarray(source, dtype=float)
@@ -207,7 +212,7 @@ def impulse_responses(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: in
 def emitter_directivity(facing: np.ndarray, p: float):
     """The device's loudspeaker as pyroomacoustics sees it: a cardioid-family pattern (``p``:
     1 omnidirectional, 0.5 cardioid) pointing along ``facing``."""
-    from pyroomacoustics.directivities import CardioidFamily, DirectionVector
+    from pyroomacoustics.directivities import CardioidFamily, DirectionVector  # heavy (1.4 s to import): only where it simulates or analyses
 
     f = np.asarray(facing, float) / np.linalg.norm(facing)
     direction = DirectionVector(np.degrees(np.arctan2(f[1], f[0])), np.degrees(np.arccos(np.clip(f[2], -1, 1))))
@@ -238,7 +243,13 @@ def device_direct_amplitude(scene: Scene, pose: DevicePose) -> float:
     return direct_amplitude(r, scene.emitter_p + (1 - scene.emitter_p) * cos)
 
 
-def _microphone(x: np.ndarray, sound: np.ndarray, direct_amp: float, rng: np.random.Generator, snr_db: float,
+def recording_conditions(rng: np.random.Generator) -> tuple[float, float, float]:
+    """One recording's background noise and microphone self-noise (dB below the direct sound)
+    and recording gain (dB), drawn within PROTOCOL.md's ranges."""
+    return rng.uniform(20, 40), rng.uniform(55, 70), rng.uniform(-6, 0)
+
+
+def through_microphone(x: np.ndarray, sound: np.ndarray, direct_amp: float, rng: np.random.Generator, snr_db: float,
                 self_noise_db: float, gain_db: float) -> np.ndarray:
     """What the microphone adds to the sound field ``x``: pink background noise and white
     self-noise, ``snr_db`` and ``self_noise_db`` below the direct sound, then its sensitivity and
@@ -280,7 +291,7 @@ def record_pulse(ir: np.ndarray, sound: np.ndarray, direct_amp: float, rng: np.r
     if sound.ndim != 1 or sound.size > n:
         raise VrechoError(f"sound: must be 1-D and at most {n} samples, got shape {sound.shape}")
     x = np.fft.irfft(np.fft.rfft(ir, n) * np.fft.rfft(sound, n), n)
-    return _microphone(x, sound, direct_amp, rng, snr_db, self_noise_db, gain_db)
+    return through_microphone(x, sound, direct_amp, rng, snr_db, self_noise_db, gain_db)
 
 
 def record_source(ir: np.ndarray, sound: np.ndarray, onset_s: float, direct_amp: float,
@@ -299,7 +310,7 @@ def record_source(ir: np.ndarray, sound: np.ndarray, onset_s: float, direct_amp:
     excitation[start:start + k] = sound[:k]
     m = 2 * n
     x = np.fft.irfft(np.fft.rfft(ir, m) * np.fft.rfft(excitation, m), m)[..., :n]
-    return _microphone(x, sound, direct_amp, rng, snr_db, self_noise_db, gain_db)
+    return through_microphone(x, sound, direct_amp, rng, snr_db, self_noise_db, gain_db)
 
 
 def echo_delay_s(scene: Scene, pose: DevicePose, index: int | None = None) -> float:

@@ -1,4 +1,5 @@
-"""How good a repaired scan is, against the scene's truth (the benchmark of the reconstruction).
+"""The truth: what a perfect decider says of each hole (:class:`Oracle`), and how good a repaired
+scan is against the scene (the benchmark of the reconstruction).
 
 Every metric reads only meshes, so any method is judged alike (vrecho's repair, open3d's
 generic hole filling, no repair at all):
@@ -17,18 +18,83 @@ generic hole filling, no repair at all):
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
-from .render import World, _triangulate
-from .scene import Scene, distance_to_polygon, point_in_polygon
+from ..reconstruct.decide import Decision
+from ..reconstruct.discontinuities import Hole
+from ..scene import Scene, distance_to_polygon, point_in_polygon, triangulate_polygon
+from .ambient import SimulatedCapture, hear_scene
+from .render import World
+
+
+def match_truth(scene: Scene, hole: Hole, max_offset_m: float = 0.15) -> int | None:
+    """The scene's discontinuity a hole belongs to (largest overlap on the same wall), or None."""
+    best, best_area = None, 0.0
+    polygon = hole.polygon()
+    for k, d in enumerate(scene.discontinuities):
+        origin, u, normal = scene.room.wall_frame(d.wall)
+        if hole.plane.normal @ normal > -np.cos(np.radians(10)):
+            continue
+        if abs(np.mean((polygon - origin) @ normal)) > max_offset_m:
+            continue
+        uz = np.stack([(polygon - origin) @ u, polygon[:, 2]], axis=1)
+        u0, u1, z0, z1 = d.bounds()
+        du = max(0.0, min(u1, uz[:, 0].max()) - max(u0, uz[:, 0].min()))
+        dz = max(0.0, min(z1, uz[:, 1].max()) - max(z0, uz[:, 1].min()))
+        if du * dz > best_area:
+            best, best_area = k, du * dz
+    return best
+
+
+def oracle(scene: Scene, holes_: list[Hole]) -> list[Decision]:
+    """The true answer for each hole: what a perfect EchoCNN would say. A hole that is none of
+    the scene's discontinuities is plain wall the camera failed to see: closed, no material."""
+    out = []
+    for hole in holes_:
+        k = match_truth(scene, hole)
+        if k is not None and scene.discontinuities[k].is_open:
+            out.append(Decision("open", None, None, 0.0, 0.0, 1.0, "oracle"))
+            continue
+        wall = scene.discontinuities[k].wall if k is not None else None
+        if wall is None:  # the nearest of the room's walls
+            wall = int(np.argmax([hole.plane.normal @ -scene.room.wall_frame(w)[2]
+                                  for w in range(len(scene.room.footprint))]))
+        origin, _, normal = scene.room.wall_frame(wall)
+        c = hole.polygon().mean(axis=0)
+        on_wall = c - ((c - origin) @ normal) * normal  # the true wall at the hole's centre
+        material = scene.discontinuities[k].kind if k is not None else "wall"
+        out.append(Decision("closed", material, float(-(hole.plane.normal @ on_wall)), 1.0,
+                            float(material == "mirror"), 1.0, "oracle"))
+    return out
+
+
+class Oracle:
+    """The truth as a decider of :func:`vrecho.reconstruct.reconstruct` (``decide=Oracle(scene)``,
+    ``vrecho reconstruct --labels oracle``): :func:`oracle`'s answers, no recordings needed."""
+
+    label = "oracle"
+    hears = False
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+
+    def __call__(self, holes_: list[Hole], views=None, echoes=None, *, mesh=None, walls=()) -> list[Decision]:
+        return oracle(self.scene, holes_)
+
 
 ADDED_M = 0.02
+
+
 CELL_M = 0.03
+
+
 PHANTOM_M = 0.15
 
 
 def _rc(mesh):
-    import open3d as o3d
+    import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 
     rc = o3d.t.geometry.RaycastingScene()
     rc.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
@@ -36,7 +102,7 @@ def _rc(mesh):
 
 
 def _distance(rc, points: np.ndarray) -> np.ndarray:
-    import open3d as o3d
+    import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 
     if not len(points):
         return np.zeros(0)
@@ -73,11 +139,11 @@ def sample_surface(mesh, density_per_m2: float, seed: int = 0) -> np.ndarray:
 
 def _sample_polygons(polygons: list[np.ndarray], n: int, seed: int = 0) -> np.ndarray:
     """About ``n`` points spread uniformly over planar polygons (K, 3)."""
-    import open3d as o3d
+    import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 
     verts, tris = [], []
     for p in polygons:
-        tris.append(_triangulate(p) + sum(len(v) for v in verts))
+        tris.append(triangulate_polygon(p) + sum(len(v) for v in verts))
         verts.append(p)
     mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.vstack(verts)),
                                      o3d.utility.Vector3iVector(np.vstack(tris).astype(np.int32)))
@@ -88,7 +154,7 @@ def added_surface(initial, mesh, near: tuple[np.ndarray, np.ndarray] | None = No
                   density_per_m2: float = 10_000.0) -> np.ndarray:
     """Points (N, 3) on the parts of ``mesh`` more than 2 cm from ``initial`` (within the box
     ``near`` = (lo, hi) when given)."""
-    import open3d as o3d
+    import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 
     rc = _rc(initial)
     v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
@@ -117,8 +183,6 @@ def phantom_area_m2(scene: Scene, mesh, world: World | None = None, density_per_
 def _finite(mesh):
     """A copy without the triangles that touch a non-finite vertex or one more than 10 km away
     (open3d's ``fill_holes`` makes both)."""
-    import copy
-
     v = np.asarray(mesh.vertices)
     with np.errstate(invalid="ignore"):
         bad = ~np.all(np.isfinite(v) & (np.abs(v) < 1e4), axis=1)
@@ -178,3 +242,23 @@ def score(scene: Scene, initial, mesh, world: World | None = None, n_chamfer: in
         "depth_error_cm": depth_errors,
         "chamfer_cm": 100 * float(chamfer),
     }
+
+
+class SceneTruth:
+    """What the simulator knows of a scene that a command may ask: the answers
+    (:meth:`oracle`), the repair's metrics (:meth:`score`) and its sources heard along the
+    walkthrough (:meth:`captures`)."""
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+
+    def oracle(self) -> Oracle:
+        return Oracle(self.scene)
+
+    def score(self, initial, repaired) -> dict:
+        """:func:`score` of a repair of the scan ``initial``."""
+        return score(self.scene, initial, repaired)
+
+    def captures(self, rng, *, n_poses: int = 8) -> SimulatedCapture:
+        """The scene's sources heard by the headset along its walkthrough (:func:`~.ambient.hear_scene`)."""
+        return hear_scene(self.scene, rng, n_poses)

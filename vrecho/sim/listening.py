@@ -11,11 +11,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
+from ..features import echo_response, logmel
+from ..scene import Scene
+from ..signals import FS, emitted_sound, probe
 from .acoustics import device_direct_amplitude, device_impulse_response, echo_delay_s, record_pulse
-from .features import echo_response, logmel
-from .scene import Scene
-from .signals import FS, emitted_sound, probe
+from .render import World, crop
+
 
 ECHO_WINDOW_S = 0.3e-3
 
@@ -38,8 +41,6 @@ class Observation:
 
 def listen(scene: Scene, rng: np.random.Generator | None = None, progress: bool = True) -> list[Observation]:
     """Simulate the probe at every pose of ``scene`` that faces a discontinuity."""
-    from tqdm import tqdm
-
     rng = np.random.default_rng(0) if rng is None else rng
     sound = probe()
     out = []
@@ -82,12 +83,10 @@ def table(observations: list[Observation], predictions=None) -> str:
 def figure(scene: Scene, observations: list[Observation], path: Path) -> Path:
     """Per surface: the clap's log-mel spectrogram, the probe's echo response with the expected
     echo marked, and the camera's crop."""
-    import matplotlib
+    import matplotlib  # heavy (0.8 s to import): only figures need it
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from .render import World, crop
+    import matplotlib.pyplot as plt  # once the Agg backend is chosen: no display needed
 
     world = World(scene)
     first = {}  # per surface, the pose nearest 1.5 m: its echo stands clear of the direct sound

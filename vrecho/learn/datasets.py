@@ -33,11 +33,20 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import numpy as np
+import multiprocessing
 
-from .errors import VrechoError
-from .io import atomic_write_text, ensure_writable_dir
-from .signals import FS, SOUNDS, TRAIN_SOUNDS, emitted_sound
+import numpy as np
+from tqdm import tqdm
+
+from ..errors import VrechoError
+from ..features import logmel
+from ..io import atomic_write_text, ensure_writable_dir
+from ..scene import load_scene
+from ..signals import FS, SOUNDS, TRAIN_SOUNDS, emitted_sound, probe, random_probe
+from ..sim.acoustics import (device_direct_amplitude, device_impulse_response, direct_amplitude, impulse_responses,
+                             record_pulse, record_source, recording_conditions)
+from ..sim.render import World, crop
+from ..sim.scenes import random_scene
 
 FORMAT_VERSION = 1
 LABEL_COLUMNS = ("frame", "scene", "split", "kind", "pose", "ir", "sound", "heard", "sound_seed", "surface",
@@ -76,21 +85,9 @@ def _block(preset: Preset) -> int:
     return (preset.n_poses + preset.n_sources) * len(SOUNDS)
 
 
-def recording_conditions(rng: np.random.Generator) -> tuple[float, float, float]:
-    """One recording's background noise and microphone self-noise (dB below the direct sound)
-    and recording gain (dB), drawn within PROTOCOL.md's ranges."""
-    return rng.uniform(20, 40), rng.uniform(55, 70), rng.uniform(-6, 0)
-
-
 def _scene_rows(out: Path, index: int, preset_name: str, seed: int, split: str, cache) -> list[dict]:
     """Simulate one room, write its arrays and return its label rows."""
-    import zarr
-
-    from .acoustics import (device_direct_amplitude, device_impulse_response, direct_amplitude, impulse_responses,
-                            record_pulse, record_source)
-    from .features import logmel
-    from .render import World, crop
-    from .scene import random_scene
+    import zarr  # heavy (0.5 s to import): only the dataset's arrays need it
 
     preset = PRESETS[preset_name]
     rng = np.random.default_rng([seed, index])
@@ -181,12 +178,11 @@ def generate(out: str | Path, preset: str = "tiny", seed: int = 0, workers: int 
     workers : int, optional
         Processes; one per core by default.
     cache : path, optional
-        Impulse-response cache folder (default: :func:`vrecho.acoustics.default_cache_dir`).
+        Impulse-response cache folder (default: :func:`vrecho.sim.acoustics.default_cache_dir`).
     progress : bool
         Show a progress bar.
     """
-    import zarr
-    from tqdm import tqdm
+    import zarr  # heavy (0.5 s to import): only the dataset's arrays need it
 
     if preset not in PRESETS:
         raise VrechoError(f"preset: expected one of {tuple(PRESETS)}, got {preset!r}")
@@ -235,8 +231,6 @@ def generate(out: str | Path, preset: str = "tiny", seed: int = 0, workers: int 
                 _scene_rows(out, i, preset, seed, splits[i], cache)
                 bar.update()
         else:
-            import multiprocessing
-
             with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                      initializer=_worker_init) as pool:
                 futures = [pool.submit(_scene_rows, out, i, preset, seed, splits[i], cache) for i in todo]
@@ -268,7 +262,7 @@ class Dataset:
     """
 
     def __init__(self, path: str | Path):
-        import zarr
+        import zarr  # heavy (0.5 s to import): only the dataset's arrays need it
 
         self.path = Path(path)
         manifest_path = self.path / "manifest.json"
@@ -326,11 +320,6 @@ class Dataset:
             For each frame, a stored frame of the same impulse response (its labels and image).
         probe_kind : numpy.ndarray of str, shape (N,)
         """
-        from tqdm import tqdm
-
-        from .acoustics import device_direct_amplitude, record_pulse
-        from .signals import probe, random_probe
-
         if not set(probes) <= {"vrecho", "random"}:
             raise VrechoError(f"probes: expected 'vrecho' or 'random' entries, got {probes!r}")
         L = self.labels
@@ -360,8 +349,6 @@ class Dataset:
                              np.random.default_rng(int(self.labels["sound_seed"][frame])))
 
     def scene(self, index: int):
-        from .scene import load_scene
-
         return load_scene(self.path / "scenes" / f"scene_{index:04d}.json")
 
 

@@ -24,12 +24,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import torch
+import torch  # this module trains and judges models: torch is what it is for
+from scipy.signal import resample_poly
 
-from .errors import VrechoError
-from .io import atomic_write_text, ensure_writable_dir
-from .models import (CLASS_HEADS, DEPTH_BINS_M, ECHO_FS, HEADS, MIC_OFFSET_M, SPEED_OF_SOUND, EchoCNN,
-                     FeatureBaseline, build)
+from ..errors import VrechoError
+from ..features import echo_features
+from ..io import atomic_write_text, ensure_writable_dir
+from ..models import CLASS_HEADS, DEPTH_BINS_M, HEADS, EchoCNN, FeatureBaseline, build
+from ..scene import MIC_ABOVE_EMITTER_M
+from ..signals import FS, SPEED_OF_SOUND
+from .datasets import open_dataset
 from .train import fit, metrics, predict_batches, targets
 
 
@@ -117,10 +121,6 @@ class Frames:
 
     def inputs(self, keys) -> dict[str, torch.Tensor]:
         """Tensors for the given input names (``echo`` means ``envelope`` and ``bands``)."""
-        from scipy.signal import resample_poly
-
-        from .features import echo_features
-
         names = [k for key in keys for k in (("envelope", "bands") if key == "echo" else (key,))]
         for name in names:
             if name in self._x:
@@ -161,8 +161,6 @@ class Harness:
     """Frames of every protocol and split, loaded on demand and shared by the methods."""
 
     def __init__(self, data, seed: int = 0, progress: bool = True):
-        from .data import open_dataset
-
         self.ds = open_dataset(data)
         self.seed, self.progress = seed, progress
         self._frames: dict[tuple[str, str], Frames] = {}
@@ -362,11 +360,11 @@ def write_tables(results: dict, methods, meta: dict, out: Path) -> None:
 def confusion_figures(outputs: dict, methods, harness: Harness, out: Path) -> list[Path]:
     """One PNG per class head: a confusion matrix per method (rows true, columns predicted,
     normalised per true class)."""
-    import matplotlib
+    import matplotlib  # heavy (0.8 s to import): only figures need it
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from sklearn.metrics import confusion_matrix
+    import matplotlib.pyplot as plt  # once the Agg backend is chosen: no display needed
+    from sklearn.metrics import confusion_matrix  # heavy (1.7 s to import): only this figure needs it
 
     labels = {"open": ("closed", "open"), "material": ("glass", "mirror"),
               "depth_bin": tuple(f"{d:g}" for d in DEPTH_BINS_M), "depth_ft": ("1 ft", "2 ft", "3 ft")}
@@ -411,10 +409,10 @@ def activation_maximisation(models: dict[str, EchoCNN], path, steps: int = 300, 
     spectrograms; an echo model (EchoCNN-E) a panel of recovered impulse-response envelopes,
     with each class's depth range marked where its echo should be.
     """
-    import matplotlib
+    import matplotlib  # heavy (0.8 s to import): only figures need it
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # once the Agg backend is chosen: no display needed
 
     k = len(DEPTH_BINS_M)
     idx = torch.arange(k)
@@ -459,8 +457,8 @@ def activation_maximisation(models: dict[str, EchoCNN], path, steps: int = 300, 
         for c, ax in enumerate(axes[row]):
             title = f"{DEPTH_BINS_M[c]:g} m class ({'attention' if echo else 'p'}={probs[c]:.2f})"
             if echo:
-                travel = SPEED_OF_SOUND * np.arange(a.shape[1]) / ECHO_FS  # emitter -> surface -> microphone
-                ax.plot(np.sqrt(np.maximum(travel ** 2 - MIC_OFFSET_M ** 2, 0)) / 2, 80 * a[c], lw=0.7)
+                travel = SPEED_OF_SOUND * np.arange(a.shape[1]) / FS  # emitter -> surface -> microphone
+                ax.plot(np.sqrt(np.maximum(travel ** 2 - MIC_ABOVE_EMITTER_M ** 2, 0)) / 2, 80 * a[c], lw=0.7)
                 ax.axvspan(DEPTH_BINS_M[c] - 0.25, DEPTH_BINS_M[c] + 0.25, color="r", alpha=0.2)
                 ax.set_xlim(0, 3.5)
                 ax.set_xlabel("echo distance (m)", fontsize=7)

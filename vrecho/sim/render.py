@@ -1,4 +1,4 @@
-"""The camera: grayscale images and depth frames of a scene by ray casting (open3d).
+"""What a camera sees of a scene: grayscale images and depth frames by ray casting (open3d).
 
 What a camera sees follows PROTOCOL.md: an opening shows what lies beyond the room (an exterior
 of ground, buildings and sky drawn per scene); glass shows what lies beyond, slightly dimmed,
@@ -7,74 +7,40 @@ the way real ones do: through glass it returns what lies beyond, or nothing (per
 ``Discontinuity.depth_sensor_sees_through``), and in a mirror it returns the length of the
 reflected path: a phantom room behind the wall.
 
-Camera frame conventions are OpenCV's (x right, y down, z forward); poses are camera-to-world.
+Camera frame conventions are :mod:`vrecho.camera`'s (OpenCV's; poses camera-to-world).
 """
 
 from __future__ import annotations
 
 import zlib
-from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import VrechoError
-from .scene import DevicePose, Scene
+from ..camera import CROP_SHAPE, DEPTH_MAX_M, Camera, View, crop_grid
+from ..errors import VrechoError
+from ..scene import DevicePose, Scene, triangulate_polygon
 
-CROP_SHAPE = (64, 25)
-"""Rows x columns of the grayscale crop around a discontinuity (the paper's 64 x 25 image)."""
+
 GLASS_TRANSMIT = 0.85
+
+
 GLASS_REFLECT = 0.08
+
+
 MIRROR_REFLECT = 0.92
+
+
 MAX_BOUNCES = 3
-DEPTH_MAX_M = 10.0
+
+
 _DIFFUSE, _GLASS, _MIRROR = 0, 1, 2
-
-
-@dataclass(frozen=True)
-class Camera:
-    """A pinhole camera: image size in pixels and horizontal field of view in degrees."""
-
-    width: int = 320
-    height: int = 240
-    fov_deg: float = 65.0
-
-    @property
-    def intrinsics(self) -> np.ndarray:
-        f = 0.5 * self.width / np.tan(np.radians(self.fov_deg) / 2)
-        return np.array([[f, 0, (self.width - 1) / 2], [0, f, (self.height - 1) / 2], [0, 0, 1.0]])
-
-
-@dataclass
-class View:
-    """One rendered frame: ``gray`` (H, W) in [0, 1], ``depth`` (H, W) z-depth in metres with 0
-    where the sensor returns nothing, ``intrinsics`` (3, 3), ``pose`` (4, 4) camera-to-world."""
-
-    gray: np.ndarray
-    depth: np.ndarray
-    intrinsics: np.ndarray
-    pose: np.ndarray
-
-
-def camera_pose(position, forward, up=(0.0, 0.0, 1.0)) -> np.ndarray:
-    """Camera-to-world 4 x 4 matrix (OpenCV axes) at ``position`` looking along ``forward``."""
-    f = np.asarray(forward, float)
-    f = f / np.linalg.norm(f)
-    right = np.cross(f, up)
-    if np.linalg.norm(right) < 1e-9:
-        raise VrechoError("camera: forward must not be parallel to up")
-    right /= np.linalg.norm(right)
-    down = np.cross(f, right)
-    T = np.eye(4)
-    T[:3, :3] = np.stack([right, down, f], axis=1)
-    T[:3, 3] = position
-    return T
 
 
 class World:
     """The scene as open3d ray-casting geometry, with what each piece looks like."""
 
     def __init__(self, scene: Scene):
-        import open3d as o3d
+        import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 
         self.scene = scene
         self._rc = o3d.t.geometry.RaycastingScene()
@@ -108,9 +74,9 @@ class World:
                           int(rng.integers(4, 6)))
 
     def _add(self, corners: np.ndarray, kind: int, albedo: float, sees_through: bool, pattern: int) -> None:
-        import open3d as o3d
+        import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 
-        tris = _triangulate(corners)
+        tris = triangulate_polygon(corners)
         mesh = o3d.t.geometry.TriangleMesh()
         mesh.vertex.positions = o3d.core.Tensor(corners.astype(np.float32))
         mesh.triangle.indices = o3d.core.Tensor(tris.astype(np.int32))
@@ -132,7 +98,7 @@ class World:
 
     def cast(self, origins: np.ndarray, dirs: np.ndarray):
         """Distance, geometry id (-1 on a miss) and unit normal of the first hit of each ray."""
-        import open3d as o3d
+        import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 
         rays = o3d.core.Tensor(np.hstack([origins, dirs]).astype(np.float32))
         ans = self._rc.cast_rays(rays)
@@ -233,30 +199,6 @@ def _reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
     return d - 2 * np.sum(d * n, axis=1, keepdims=True) * n
 
 
-def _triangulate(corners: np.ndarray) -> np.ndarray:
-    """Triangles of a planar polygon (K, 3): a fan when convex, else Delaunay triangles whose
-    centroids fall inside the polygon."""
-    k = len(corners)
-    if k == 3:
-        return np.array([[0, 1, 2]])
-    normal = np.cross(corners[1] - corners[0], corners[-1] - corners[0])
-    normal /= np.linalg.norm(normal)
-    e1 = (corners[1] - corners[0]) / np.linalg.norm(corners[1] - corners[0])
-    e2 = np.cross(normal, e1)
-    p2 = np.stack([(corners - corners[0]) @ e1, (corners - corners[0]) @ e2], axis=1)
-    edges = np.roll(p2, -1, axis=0) - p2
-    cross = edges[:, 0] * np.roll(edges, -1, axis=0)[:, 1] - edges[:, 1] * np.roll(edges, -1, axis=0)[:, 0]
-    if np.all(cross >= -1e-12) or np.all(cross <= 1e-12):
-        return np.array([[0, i, i + 1] for i in range(1, k - 1)])
-    from scipy.spatial import Delaunay
-
-    from .scene import point_in_polygon
-
-    tri = Delaunay(p2).simplices
-    keep = point_in_polygon(p2[tri].mean(axis=1), p2)
-    return tri[keep]
-
-
 def render_view(world: World | Scene, pose: np.ndarray, camera: Camera = Camera()) -> View:
     """Render a grayscale image and a depth frame from a camera-to-world ``pose`` (4, 4)."""
     world = World(world) if isinstance(world, Scene) else world
@@ -290,92 +232,9 @@ def crop(world: World | Scene, pose: DevicePose, index: int | None = None, shape
     index = pose.target if index is None else index
     if index is None or not 0 <= index < len(scene.discontinuities):
         raise VrechoError(f"crop: no discontinuity {index!r} to look at")
-    targets = _crop_grid(scene.discontinuity_corners(index), shape, margin)
+    targets = crop_grid(scene.discontinuity_corners(index), shape, margin)
     origin = pose.camera
     dirs = targets - origin
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     gray = world.trace(np.broadcast_to(origin, dirs.shape).copy(), dirs)
     return np.round(255 * gray.reshape(shape)).astype(np.uint8)
-
-
-def crop_view(view: View, corners: np.ndarray, shape: tuple[int, int] = CROP_SHAPE,
-              margin: float = 0.15) -> tuple[np.ndarray, float]:
-    """The same crop as :func:`crop`, resampled (bilinearly) from a camera frame: what a real
-    capture gives. ``corners`` (4, 3): a wall rectangle wound like the scene's walls, (u0, z0),
-    (u1, z0), (u1, z1), (u0, z1). Points outside the frame or behind the camera are black.
-
-    Returns
-    -------
-    crop : numpy.ndarray, shape (64, 25), uint8
-    inside : float
-        Share of the crop that lies within the frame (1 when the frame holds all of it).
-    """
-    from scipy.ndimage import map_coordinates
-
-    col, row, z = project(view, _crop_grid(np.asarray(corners, float), shape, margin))
-    h, w = view.gray.shape
-    ok = (z > 1e-3) & (col >= 0) & (col <= w - 1) & (row >= 0) & (row <= h - 1)
-    gray = np.zeros(len(z))
-    gray[ok] = map_coordinates(view.gray.astype(np.float64), [row[ok], col[ok]], order=1)
-    return np.round(255 * np.clip(gray, 0, 1).reshape(shape)).astype(np.uint8), float(ok.mean())
-
-
-def project(view: View, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pixel column, row (floats) and z-depth (metres) of world points (N, 3) in a frame; points
-    behind the camera get meaningless pixels (check ``z``)."""
-    cam = (np.asarray(points, float) - view.pose[:3, 3]) @ view.pose[:3, :3]
-    z = cam[:, 2]
-    K = view.intrinsics
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return K[0, 0] * cam[:, 0] / z + K[0, 2], K[1, 1] * cam[:, 1] / z + K[1, 2], z
-
-
-def _crop_grid(c: np.ndarray, shape: tuple[int, int], margin: float) -> np.ndarray:
-    """World points (rows * cols, 3) of a crop of the rectangle ``c``: left to right from u1 to
-    u0 (the wall seen from the room), top to bottom from z1 to z0, widened by ``margin``."""
-    rows, cols = shape
-    a = np.linspace(-margin, 1 + margin, cols)[None, :, None]
-    b = np.linspace(1 + margin, -margin, rows)[:, None, None]
-    return (c[1] + a * (c[0] - c[1]) + b * (c[3] - c[0])).reshape(-1, 3)
-
-
-def render_mesh(mesh, pose: np.ndarray, camera: Camera = Camera()) -> np.ndarray:
-    """An RGB picture (H, W, 3) in [0, 1] of an open3d triangle mesh from a camera-to-world
-    ``pose``: vertex colours, lit from the camera (headless: ray casting, no OpenGL)."""
-    import open3d as o3d
-
-    rc = o3d.t.geometry.RaycastingScene()
-    rc.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
-    rays = rc.create_rays_pinhole(o3d.core.Tensor(camera.intrinsics), o3d.core.Tensor(np.linalg.inv(pose)),
-                                  camera.width, camera.height)
-    ans = rc.cast_rays(rays)
-    hit = np.isfinite(ans["t_hit"].numpy())
-    prim = ans["primitive_ids"].numpy()
-    normals = ans["primitive_normals"].numpy()
-    dirs = rays.numpy()[..., 3:]
-    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
-    tris = np.asarray(mesh.triangles)
-    colours = np.asarray(mesh.vertex_colors) if mesh.has_vertex_colors() else np.full((len(mesh.vertices), 3), 0.7)
-    img = np.ones((camera.height, camera.width, 3))
-    p = prim[hit]
-    light = 0.35 + 0.65 * np.abs(np.sum(normals[hit] * dirs[hit], axis=-1))
-    img[hit] = colours[tris[p]].mean(axis=1) * light[:, None]
-    return np.clip(img, 0, 1)
-
-
-def mesh_depth(mesh, poses: np.ndarray, intrinsics: np.ndarray, width: int, height: int) -> np.ndarray:
-    """Depth frames (N, H, W) float32 of an open3d triangle mesh seen from camera-to-world
-    ``poses`` (N, 4, 4) through a pinhole ``intrinsics``: z-depth in metres, 0 where a ray meets
-    nothing within :data:`DEPTH_MAX_M`. What a depth sensor reads off a user's mesh: where the
-    mesh has a hole the ray goes on to whatever lies beyond it, as the sensor's did."""
-    import open3d as o3d
-
-    rc = o3d.t.geometry.RaycastingScene()
-    rc.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
-    K = o3d.core.Tensor(np.asarray(intrinsics, float))
-    out = np.zeros((len(poses), height, width), np.float32)
-    for k, pose in enumerate(np.asarray(poses, float)):
-        rays = rc.create_rays_pinhole(K, o3d.core.Tensor(np.linalg.inv(pose)), width, height)
-        z = rc.cast_rays(rays)["t_hit"].numpy()  # the rays' directions have z = 1 in the camera: t is z-depth
-        out[k] = np.where(np.isfinite(z) & (z <= DEPTH_MAX_M), z, 0.0)
-    return out

@@ -1,9 +1,9 @@
 """What the headset's camera says of the surface its echoes found: a wall, glass or a mirror.
 
-The echo says *that* a surface lies ahead and how far (:class:`vrecho.boundary.BoundaryMonitor`);
+The echo says *that* a surface lies ahead and how far (:class:`vrecho.headset.BoundaryMonitor`);
 glass, a mirror and a wall return the monitor's 4-20 kHz probe alike (their absorption differs
 by hundredths there, PROTOCOL.md), so the echo cannot say *what* it is. The headset's depth
-camera can, because of how it fails (PROTOCOL.md, :mod:`vrecho.render`):
+camera can, because of how it fails (PROTOCOL.md, :mod:`vrecho.sim.render`):
 
 1. **Wall.** Straight ahead (rays within ``CONE_DEG`` of the optical axis) the depth sensor
    reads the plane the echo comes from: at least half of its readings there lie within
@@ -11,7 +11,7 @@ camera can, because of how it fails (PROTOCOL.md, :mod:`vrecho.render`):
 2. **Glass or mirror.** Otherwise the sensor sees past the echo's plane (through glass to what
    lies beyond, in a mirror the phantom room behind it) or gets nothing back: those pixels are
    the pane. The region they form around the straight-ahead direction, widened by 15 % on
-   each side as EchoCNN's crops of a discontinuity are (:func:`vrecho.render.crop`), resampled to
+   each side as EchoCNN's crops of a discontinuity are (:func:`vrecho.sim.render.crop`), resampled to
    PROTOCOL.md's 64 x 25 grayscale crop, goes to EchoCNN's visual branch (the paper's
    image sub-network, ``EchoCNN(inputs=("image",))``), trained here on such crops from
    simulated headsets (:func:`train`, weights ``vrecho/assets/headset_view.pt``): glass shows
@@ -24,32 +24,35 @@ askew, so a narrow pane looked at from its edge can read as the wall beside it (
 a surface, the wearer faces it). Call :func:`look` from the camera's thread, not the audio
 callback (a few milliseconds a frame).
 
-Train the shipped weights again with ``python3 -m vrecho.headset_view`` (see :func:`train`).
+Train the shipped weights again with ``python3 -m vrecho.learn.headset_view``.
 """
 
 from __future__ import annotations
 
-import argparse
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
+from scipy import ndimage
 
-from .errors import VrechoError
-from .models import EchoCNN, build
-from .render import CROP_SHAPE, Camera
+from ..camera import CROP_SHAPE
+from ..errors import VrechoError
+
+if TYPE_CHECKING:
+    from ..models import EchoCNN
+
 
 CONE_DEG = 5.0
 """Half-angle of the straight-ahead cone whose depth readings decide "wall"."""
+
+
 MARGIN = 0.15
 """The pane's region is widened by this share of its size on each side, as EchoCNN's crops are."""
+
+
 WEIGHTS = "headset_view.pt"
-HEADSET_CAMERA = Camera(width=320, height=240, fov_deg=100.0)
-"""The simulated headset's camera (benchmarks, tests): wide, as headsets' tracking cameras are."""
-TRAIN_SEED = 31000
-"""Training rooms are drawn from this seed up (never the benchmarks' 5000 and 6000)."""
 
 
 @dataclass
@@ -105,7 +108,6 @@ def _pane(g: np.ndarray, z: np.ndarray, cone: np.ndarray, distance_m: float) -> 
     agree = float(np.mean((z[cone] >= lo) & (z[cone] <= hi)))
     if agree >= 0.5:
         return agree, None
-    from scipy import ndimage
 
     beyond = (z == 0) | (z > hi)
     labels, _ = ndimage.label(beyond)
@@ -181,6 +183,8 @@ def look_all(image, depth, intrinsics, distances_m, model: EchoCNN | None = None
 
 def material_probability(crops: np.ndarray, model: EchoCNN | None = None) -> np.ndarray:
     """P(mirror) of each 64 x 25 uint8 crop (N, 64, 25)."""
+    import torch  # heavy (1.7 s): the audio path imports this module and never classifies
+
     model = model or load_model()
     x = torch.as_tensor(np.asarray(crops, np.float32) / 255)
     with torch.no_grad():
@@ -192,7 +196,7 @@ _MODEL: EchoCNN | None = None
 
 def load_model(path: str | Path | None = None) -> EchoCNN:
     """The visual branch with the weights shipped in the package (loaded once), or those of
-    ``path`` (written by :func:`train`)."""
+    ``path`` (written by :func:`save`, as :mod:`vrecho.learn.headset_view` does)."""
     global _MODEL
     if path is None and _MODEL is not None:
         return _MODEL
@@ -206,6 +210,10 @@ def load_model(path: str | Path | None = None) -> EchoCNN:
 
 
 def _load(path: Path) -> EchoCNN:
+    import torch  # heavy (1.7 s): the audio path imports this module and never classifies
+
+    from ..models import build  # torch-bound, as above
+
     try:
         saved = torch.load(path, weights_only=True)
         model = build(saved["config"])
@@ -215,134 +223,9 @@ def _load(path: Path) -> EchoCNN:
     return model.eval()
 
 
-# -- Training data: simulated headsets in front of glass and mirrors ----------------------------------
-def headset_views(rng: np.random.Generator, name: str):
-    """The crops :func:`look` would classify, from one random room (PROTOCOL.md's rooms and
-    panes, :func:`vrecho.scene.random_scene`): for each glass or mirror that spans a head's
-    height, a few headset poses 0.5 to 3.5 m in front of it (head 1.45 to 1.85 m high, facing it
-    within 20 degrees, pitched and rolled a little), cameras of 60 to 110 degrees, the echo's
-    distance read to 2 cm. Yields (crop, is_mirror, distance_m)."""
-    from .render import World, camera_pose, render_view
-    from .scene import MIC_ABOVE_EMITTER_M, random_scene
-
-    scene = random_scene(rng, name, n_poses=0, n_sources=0, n_discontinuities=(1, 3))
-    room = scene.room
-    world = None
-    for d in scene.discontinuities:
-        if d.kind == "open":
-            continue
-        u0, u1, z0, z1 = d.bounds()
-        top, bottom = min(z1 - 0.1, 1.85), max(z0 + 0.1, 1.45)
-        if top <= bottom or u1 - u0 < 0.3:
-            continue  # no head's height faces it: the echo ahead would be the wall's
-        origin, u, normal = room.wall_frame(d.wall)
-        for _ in range(6):
-            foot = origin + rng.uniform(u0 + 0.1, u1 - 0.1) * u + [0.0, 0.0, rng.uniform(bottom, top)]
-            dist = rng.uniform(0.5, 3.5)
-            yaw = np.radians(rng.uniform(-20, 20))
-            forward = np.cos(yaw) * normal + np.sin(yaw) * np.cross([0.0, 0.0, 1.0], normal)
-            emitter = foot - dist * normal  # the echo's distance is to the plane: the foot stays on the pane
-            if not room.contains(emitter[None], margin_m=0.2)[0]:
-                continue
-            forward = forward + [0.0, 0.0, np.tan(np.radians(rng.uniform(-8, 8)))]
-            roll = np.radians(rng.uniform(-5, 5))
-            side = np.cross(forward, [0.0, 0.0, 1.0])
-            up = np.cos(roll) * np.array([0.0, 0.0, 1.0]) + np.sin(roll) * side / np.linalg.norm(side)
-            width = int(rng.choice([240, 320, 400]))
-            camera = Camera(width, width * 3 // 4, float(rng.uniform(60, 110)))
-            world = world or World(scene)
-            view = render_view(world, camera_pose(emitter + [0.0, 0.0, MIC_ABOVE_EMITTER_M], forward, up), camera)
-            echo = dist + rng.normal(0.0, 0.02)
-            _, crop = pane_crop(view.gray, view.depth, view.intrinsics, echo)
-            if crop is not None:
-                yield crop, d.kind == "mirror", dist
-
-
-def _room_views(seed: int) -> list:
-    return list(headset_views(np.random.default_rng(seed), f"view_{seed}"))
-
-
-def make_dataset(n_rooms: int, seed: int = TRAIN_SEED, jobs: int = 1, progress: bool = True) -> dict[str, np.ndarray]:
-    """Crops of ``n_rooms`` rooms drawn from ``seed`` on (room ``k`` from ``seed + k``, so the
-    data do not depend on ``jobs``, the processes that render them): ``crops`` (N, 64, 25) uint8,
-    ``mirror`` (N,) bool, ``distance_m`` (N,), ``room`` (N,)."""
-    from multiprocessing import get_context
-
-    from tqdm import tqdm
-
-    seeds = range(seed, seed + n_rooms)
-    out = {"crops": [], "mirror": [], "distance_m": [], "room": []}
-    with get_context("spawn").Pool(jobs) as pool:
-        views = pool.imap(_room_views, seeds)
-        for k, room in enumerate(tqdm(views, total=n_rooms, desc="headset views", unit="room", disable=not progress)):
-            for crop, mirror, dist in room:
-                for key, value in zip(out, (crop, mirror, dist, k)):
-                    out[key].append(value)
-    return {k: np.asarray(v) for k, v in out.items()}
-
-
-def train(data: dict[str, np.ndarray], epochs: int = 60, seed: int = 0, progress: bool = True) -> tuple[EchoCNN, dict]:
-    """EchoCNN's visual branch trained on :func:`make_dataset`'s crops with
-    :func:`vrecho.train.fit` (a tenth of the rooms held out for early stopping), its material
-    head alone: the other heads' targets are left out (a depth guessed from a picture only
-    distracts it). Crops are flipped left-right at random (a pane seen from either side).
-    Returns the model and its figures on the held-out rooms."""
-    from .train import IGNORE, fit
-
-    rooms = np.unique(data["room"])
-    val_rooms = np.random.default_rng(seed).choice(rooms, max(1, len(rooms) // 10), replace=False)
-    is_val = np.isin(data["room"], val_rooms)
-
-    def split(rows, flip):
-        crops, mirror = data["crops"][rows], data["mirror"][rows]
-        if flip:
-            crops, mirror = np.concatenate([crops, crops[:, :, ::-1]]), np.concatenate([mirror, mirror])
-        n = len(crops)
-        ignored = torch.full((n,), IGNORE, dtype=torch.long)
-        y = {"open": ignored, "material": torch.as_tensor(mirror.astype(np.int64)), "depth_bin": ignored,
-             "depth_ft": ignored, "depth_m": torch.full((n,), float("nan")),
-             "src_cell": torch.full((n, 3), IGNORE, dtype=torch.long), "src_m": torch.full((n, 3), float("nan"))}
-        return {"image": torch.as_tensor(crops.astype(np.float32) / 255)}, y
-
-    torch.manual_seed(seed)
-    model = EchoCNN(inputs=("image",), hidden=64)
-    x_tr, y_tr = split(np.flatnonzero(~is_val), True)
-    x_va, y_va = split(np.flatnonzero(is_val), False)
-    history = fit(model, x_tr, y_tr, x_va, y_va, epochs=epochs, patience=8, seed=seed, progress=progress,
-                  desc="headset view")
-    p = material_probability(data["crops"][is_val], model)
-    figures = {"train_crops": int((~is_val).sum()), "val_crops": int(is_val.sum()),
-               "val_accuracy": float(np.mean((p > 0.5) == data["mirror"][is_val])), "epochs": history.epochs,
-               "seconds": history.seconds}
-    return model, figures
-
-
 def save(model: EchoCNN, path: str | Path) -> None:
     """The weights in half precision (the crops' classes do not need more) with the model's config."""
+    import torch  # heavy (1.7 s): the audio path imports this module and never classifies
+
     torch.save({"config": model.config, "state": {k: v.half() if v.is_floating_point() else v
                                                   for k, v in model.state_dict().items()}}, path)
-
-
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(prog="python3 -m vrecho.headset_view",
-                                 description="Train the headset view's glass/mirror model on simulated rooms.")
-    ap.add_argument("--rooms", type=int, default=3000)
-    ap.add_argument("--seed", type=int, default=TRAIN_SEED)
-    ap.add_argument("--epochs", type=int, default=60)
-    ap.add_argument("--jobs", type=int, default=2, help="processes rendering the rooms")
-    ap.add_argument("--data", help="an .npz of make_dataset's crops to train on (made, and kept there, if missing)")
-    ap.add_argument("--out", default=str(Path(__file__).parent / "assets" / WEIGHTS))
-    args = ap.parse_args(argv)
-    if args.data and Path(args.data).is_file():
-        data = dict(np.load(args.data))
-    else:
-        data = make_dataset(args.rooms, args.seed, args.jobs)
-        if args.data:
-            np.savez_compressed(args.data, **data)
-    model, figures = train(data, args.epochs)
-    save(model, args.out)
-    print(f"{args.out}: {figures}")
-
-
-if __name__ == "__main__":
-    main()

@@ -1,5 +1,5 @@
 """Simulated walks for the headset call: a wearer walks toward a surface while the device plays
-:class:`vrecho.boundary.BoundaryMonitor`'s probe; what its microphone records.
+:class:`vrecho.headset.BoundaryMonitor`'s probe; what its microphone records.
 
 Each probe pulse gets its own impulse response at the device's pose of that instant
 (pyroomacoustics' image sources up to second order: the specular echoes that ranging is about;
@@ -15,12 +15,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .acoustics import SPEED_OF_SOUND, Simulation, build_room, emitter_directivity
-from .errors import VrechoError
-from .scene import MIC_ABOVE_EMITTER_M, Scene
-from .signals import colored_noise
+from ..camera import Camera, camera_pose
+from ..errors import VrechoError
+from ..scene import MIC_ABOVE_EMITTER_M, Scene
+from ..signals import SPEED_OF_SOUND, colored_noise
+from .acoustics import Simulation, build_room, emitter_directivity
+from .render import render_view
+
 
 WALK_SIMULATION = Simulation(max_order=2, n_rays=0, length_s=0.06, air_absorption=True)
+
+
+HEADSET_CAMERA = Camera(width=320, height=240, fov_deg=100.0)
+"""The simulated headset's camera (benchmarks, tests): wide, as headsets' tracking cameras are."""
 
 
 @dataclass
@@ -45,7 +52,7 @@ def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: 
     """The microphone signal of a walk from ``start`` toward ``goal`` (emitter positions, metres)
     at ``speed_mps``, stopping ``stop_m`` before the target's plane (``plane``: a point on it
     and its unit normal). ``lead_s``: standing still at the start first."""
-    import pyroomacoustics as pra
+    import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
 
     start, goal = np.asarray(start, float), np.asarray(goal, float)
     p0, normal = np.asarray(plane[0], float), np.asarray(plane[1], float)
@@ -96,14 +103,11 @@ def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: 
 
 
 def headset_frames(world, walk: Walk, every: int = 6, latency_s: float = 0.05) -> list:
-    """What the headset's camera (:data:`vrecho.headset_view.HEADSET_CAMERA`, at the microphone,
+    """What the headset's camera (:data:`vrecho.sim.walks.HEADSET_CAMERA`, at the microphone,
     facing the wearer's way) shows along a walk: a frame at every ``every``-th pulse, arriving
-    ``latency_s`` after it. ``world``: the walk's scene as a :class:`vrecho.render.World`.
+    ``latency_s`` after it. ``world``: the walk's scene as a :class:`vrecho.sim.render.World`.
     Returns [(arrival time on the stream's clock, gray, depth, intrinsics)], for
-    :meth:`vrecho.boundary.BoundaryMonitor.see`."""
-    from .headset_view import HEADSET_CAMERA
-    from .render import camera_pose, render_view
-
+    :meth:`vrecho.headset.BoundaryMonitor.see`."""
     frames = []
     for k in range(0, len(walk.pulse_times_s), every):
         pose = camera_pose(walk.position_m[k] + [0.0, 0.0, MIC_ABOVE_EMITTER_M], walk.forward[k])

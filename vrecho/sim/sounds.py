@@ -19,11 +19,13 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal
 
-from vrecho.errors import VrechoError
-from vrecho.signals import SOUNDS, check_fs, colored_noise, emitted_sound
+from ..errors import VrechoError
+from ..signals import SOUNDS, check_fs, colored_noise, emitted_sound
+
 
 KINDS: tuple[str, ...] = ("speech", "music", "hum")
 """Continuous ambient sounds; :data:`vrecho.signals.SOUNDS` names are accepted too."""
+
 
 _VOWELS = ((730, 1090, 2440), (270, 2290, 3010), (300, 870, 2240), (530, 1840, 2480), (570, 840, 2410),
            (440, 1020, 2240), (660, 1720, 2410), (490, 1350, 1690))

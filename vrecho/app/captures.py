@@ -1,0 +1,77 @@
+"""``vrecho capture``: a phone's capture in, its pulses, frames, EchoCNN's answers (and a repaired
+scan) out."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from ..capture import analyse, open_capture
+from ..io import ensure_writable_dir
+from .figures import capture_figure
+from .scans import summary, write
+
+FIELDS = ("frame", "time_s", "x_m", "y_m", "z_m", "hole", "model", "open", "material", "depth_m", "p_open",
+          "p_mirror", "confidence", "flags")
+"""The columns of ``frames.csv`` (``x_m`` to ``hole`` only for a posed capture)."""
+
+
+def capture(out: str | Path, video=None, audio=None, images=None, poses=None, mesh=None, *,
+            image_fps: float | None = None, labels: str = "echocnn", emitter_distance_m: float | None = None,
+            classifier=None, progress: bool = False) -> dict:
+    """``vrecho capture``: a phone's capture in, EchoCNN's answers (and a repaired scan) out.
+
+    The pulses of the recording (a video's sound, or ``audio``) are found and cut into frames,
+    and EchoCNN answers each, the probe known (EchoCNN-E) (:func:`vrecho.capture.analyse`).
+    Written to ``out``: ``frames.csv`` (one row per frame: its time in the recording, the
+    answers and their probabilities), ``capture.png`` (the recording, the pulses found and the
+    answers) and ``images.npz`` (the picture at each frame's time, from the video or the
+    numbered pictures in ``images``).
+
+    With ``poses`` (COLMAP's text model of the pictures, numbered at ``image_fps``) and the
+    user's ``mesh`` (.ply or .obj, in the poses' world; a y-up world is turned z up, and the
+    meshes written are in that z-up world): each frame takes the pose of its pulse, the frames
+    that face a hole of the mesh are asked again with the camera's crop around it (EchoCNN-EV,
+    PROTOCOL.md's 64 x 25), and the reconstruction's repair runs on the mesh (``labels`` as
+    :func:`vrecho.reconstruct.reconstruct`): ``initial.ply``, ``repaired.ply``,
+    ``report.json``, ``before_after.png`` and ``scan/`` (which ``vrecho export`` turns into
+    USD). ``emitter_distance_m``: from the loudspeaker to the microphone (default PROTOCOL.md's
+    7 cm; a second phone held elsewhere, measured), which places each frame's start, the
+    emission, before the direct sound's arrival. Every input is checked before ``out`` is made.
+
+    Returns
+    -------
+    dict
+        ``{"rows": [...], "result": Reconstruction or None}``.
+    """
+    rec = open_capture(video, audio, images, poses, mesh, image_fps=image_fps, labels=labels,
+                       emitter_distance_m=emitter_distance_m)
+    out = ensure_writable_dir(out)
+    found = analyse(rec, classifier=classifier, progress=progress)
+    rows, result = found.rows, found.result
+    if result is not None:
+        write(result, out, save_scan=True)
+    posed = rec.poses is not None
+    with open(out / "frames.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, FIELDS if posed else [c for c in FIELDS if c not in ("x_m", "y_m", "z_m", "hole")],
+                           restval="")
+        w.writeheader()
+        w.writerows(rows)
+    if found.frame_pictures is not None:
+        np.savez_compressed(out / "images.npz", time_s=found.times, gray=found.frame_pictures)
+    capture_figure(rec.audio, rec.fs, found.onsets, rows, out / "capture.png",
+                   None if result is None else result.decisions)
+    n_open = sum(r["open"] for r in rows)
+    print(f"{len(rows)} frames: {n_open} open, {len(rows) - n_open} closed "
+          f"({sum(r['material'] == 'mirror' for r in rows)} mirror)")
+    files = "frames.csv, capture.png" + (", images.npz" if found.frame_pictures is not None else "")
+    if result is not None:
+        print(f"{sum('x_m' in r for r in rows)} frames posed; {len(result.holes)} holes in the mesh, "
+              f"{len(result.surfaces)} surfaces added")
+        if result.holes:
+            print(summary(result))
+        files += ", initial.ply, repaired.ply, report.json, before_after.png, scan/ (vrecho export takes it)"
+    print(f"written to {out}: {files}")
+    return {"rows": rows, "result": result}

@@ -1,0 +1,179 @@
+"""``vrecho reconstruct`` and ``vrecho export``: a scan (a user's, or a scene's simulated one)
+repaired, and written as meshes and a report, or as an OpenUSD stage."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+import localization
+import usd_export
+
+from ..errors import VrechoError
+from ..io import atomic_write_text, ensure_writable_dir
+from ..reconstruct import LABELS, VARIANTS, Reconstruction
+from ..reconstruct import reconstruct as repair_scan
+from .figures import before_after
+from .sources import Source, open_source, resolve
+
+LABEL_CHOICES = (*LABELS, "oracle")
+"""Who decides what each hole is: a decider of :data:`vrecho.reconstruct.LABELS`, or ``oracle``,
+the truth of a simulated scene."""
+SOURCE_CHOICES = ("none", "truth", "heard")
+
+
+def repaired(source: Source, *, labels: str = "echocnn", variant: str = "simplified", classifier=None) -> Reconstruction:
+    """A source's scan reconstructed and repaired (:func:`vrecho.reconstruct.reconstruct`), its
+    holes decided by ``labels`` (``oracle``: the simulator's truth of a scene)."""
+    decide = labels
+    if labels == "oracle":
+        if source.truth is None:
+            raise VrechoError("labels='oracle' needs the scene's truth")
+        decide = source.truth.oracle()
+    return repair_scan(source.scan, hear=source.hear, decide=decide, variant=variant, classifier=classifier)
+
+
+def _check(labels: str, variant: str, n_frames: int) -> None:
+    if labels not in LABEL_CHOICES:
+        raise VrechoError(f"labels: expected one of {LABEL_CHOICES}, got {labels!r}")
+    if variant not in VARIANTS:
+        raise VrechoError(f"variant: expected one of {VARIANTS}, got {variant!r}")
+    if n_frames < 2:
+        raise VrechoError(f"frames: expected at least 2, got {n_frames}")
+
+
+def reconstruct(source: str | Path, out: str | Path, *, labels: str = "echocnn", variant: str = "simplified",
+                n_frames: int = 60, seed: int = 0, save_scan: bool = False, progress: bool = True) -> Reconstruction:
+    """``vrecho reconstruct``: scan (or load) a source, repair it, write the results, print a summary.
+
+    Parameters
+    ----------
+    source : str or path
+        ``builtin`` (the living room), a scene JSON file, or a scan folder
+        (:func:`vrecho.reconstruct.load_scan`); checked before anything is written.
+    out : path
+        Output folder: ``initial.ply``, ``repaired.ply``, ``report.json`` (surfaces, holes,
+        decisions with their confidences and per-frame inferences, times; for a scene also the
+        metrics against its truth), ``before_after.png`` and, with ``save_scan``, ``scan/`` (the
+        scan-folder format).
+    labels : {"echocnn", "echocnn-only", "oracle"}
+        Who decides what each hole is (:data:`LABEL_CHOICES`).
+    variant : {"simplified", "per_vertex"}
+        Algorithm 1's fill.
+    n_frames : int
+        Walkthrough frames of a scene's simulated scan.
+    seed : int
+        Seed of a scene's simulated recordings.
+    progress : bool
+        Progress bars.
+    """
+    _check(labels, variant, n_frames)
+    spec = resolve(source)  # bad input answered before anything is written
+    if labels == "oracle" and isinstance(spec, Path):
+        raise VrechoError("labels='oracle' needs the scene's truth")
+    out = ensure_writable_dir(out)
+    src = open_source(spec, n_frames=n_frames, seed=seed, progress=progress)
+    result = repaired(src, labels=labels, variant=variant)
+    write(result, out, metrics=None if src.truth is None else src.truth.score(result.scan.mesh, result.repaired),
+          save_scan=save_scan)
+    print(summary(result))
+    print(f"{len(result.surfaces)} surfaces added; discontinuities and repair "
+          f"{result.seconds['total_without_hearing']:.1f} s")
+    print(f"written to {out}: initial.ply, repaired.ply, report.json, before_after.png" + (", scan/" if save_scan else ""))
+    return result
+
+
+def write(result: Reconstruction, out: Path, *, metrics: dict | None = None, save_scan: bool = False) -> None:
+    """A run's files in ``out``: ``initial.ply``, ``repaired.ply``, ``report.json`` (with
+    ``metrics``, a repair's against the truth, where given), ``before_after.png`` and, with
+    ``save_scan``, ``scan/``."""
+    import open3d as o3d  # heavy (1.2 s to import): only where meshes are written
+
+    scan = result.scan
+    o3d.io.write_triangle_mesh(str(out / "initial.ply"), scan.mesh)
+    o3d.io.write_triangle_mesh(str(out / "repaired.ply"), result.repaired)
+    report = result.report()
+    if metrics is not None:
+        report["metrics"] = metrics
+    atomic_write_text(out / "report.json", json.dumps(report, indent=1, default=float) + "\n")
+    before_after(result, out / "before_after.png")
+    if save_scan:
+        scan.save(out / "scan")
+
+
+def summary(result: Reconstruction) -> str:
+    """A table of the holes and what was done, for people."""
+    lines = ["| hole | wall | area m2 | decision | material | p(closed) | frames | action |", "|---|---|---|---|---|---|---|---|"]
+    for h in result.report()["holes"]:
+        d, a = h["decision"], h["action"]
+        act = ("filled" if a["filled"] else "left open") + (f", {a['phantom_triangles_removed']} phantom triangles removed"
+                                                           if a["phantom_triangles_removed"] else "")
+        lines.append(f"| {h['id']} | {h['wall']} | {h['area_m2']:.2f} | {d['state']} | {d['material'] or '-'} | "
+                     f"{d['p_closed']:.3f} | {len(d['frames'])} | {act} |")
+    return "\n".join(lines)
+
+
+def export(source: str | Path, out: str | Path, *, labels: str = "echocnn", variant: str = "simplified",
+           sources: str = "none", n_frames: int = 60, seed: int = 0, progress: bool = True) -> Path:
+    """``vrecho export``: reconstruct and repair a source as :func:`reconstruct` does, and write it
+    as an OpenUSD stage (:func:`usd_export.write_scene`; refused while OpenUSD's validators report
+    an error, and nothing is written then).
+
+    Parameters
+    ----------
+    source : str or path
+        As for :func:`reconstruct`.
+    out : path
+        The stage: a ``.usda``, ``.usdc``, ``.usd`` or ``.usdz`` path.
+    labels, variant, n_frames, seed, progress
+        As for :func:`reconstruct`.
+    sources : str
+        The sound sources: ``none``; ``truth`` (a scene's own sources where they are); ``heard``
+        (a scene's sources recorded by the headset's 4 microphones along the walkthrough, then
+        located and separated by :func:`localization.place_sources`; each one's error against
+        the truth is printed); or a JSON file of placed sources (:func:`usd_export.sources_from_json`).
+    """
+    usd_export.check_target(out)  # before the work, not after
+    if sources not in SOURCE_CHOICES and not Path(sources).is_file():
+        raise VrechoError(f"sources: expected 'none', 'truth', 'heard' or a JSON file, got {sources!r}")
+    _check(labels, variant, n_frames)
+    spec = resolve(source)
+    if sources in ("truth", "heard") and isinstance(spec, Path):
+        raise VrechoError(f"sources: {sources!r} needs a scene (builtin or a scene JSON), not a scan folder")
+    if labels == "oracle" and isinstance(spec, Path):
+        raise VrechoError("labels='oracle' needs the scene's truth")
+    src = open_source(spec, n_frames=n_frames, seed=seed, progress=progress)
+    result = repaired(src, labels=labels, variant=variant)
+    room, surfaces = usd_export.from_reconstruction(result)
+    if sources == "none":
+        placed = []
+    elif sources == "truth":
+        placed = usd_export.sources_from_scene(src.scene)
+    elif sources == "heard":
+        placed = _heard(src, seed, progress)
+    else:
+        placed = usd_export.sources_from_json(sources)
+    path = usd_export.write_scene(out, room, surfaces, placed)  # refuses a stage with validation errors
+    problems = usd_export.validate(path)  # the file as it lies now, and its warnings for the user
+    errors = [p for p in problems if p.severity == "error"]
+    if errors:
+        raise VrechoError(f"export: {path} has {len(errors)} validation error(s); first: {errors[0]}")
+    for p in problems:
+        print(f"  {p}")
+    print(f"{path}: {len(room[1]):,} room triangles, {len(surfaces)} surfaces "
+          f"({', '.join(f'{s.name} {s.state}' for s in surfaces) or 'none'}), {len(placed)} sound sources; "
+          f"OpenUSD's validators: no errors, {len(problems)} other findings")
+    return path
+
+
+def _heard(source: Source, seed: int, progress: bool) -> list:
+    """The scene's sources heard by the headset along its walkthrough, located and separated."""
+    sim = source.truth.captures(np.random.default_rng(seed))
+    placed = localization.place_sources(sim.captures, bounds=source.scene.room.box, progress=progress)
+    for p in placed:
+        err = min(np.linalg.norm(p.position - s.position) for s in sim.sources)
+        print(f"  {p.name} at {np.round(p.position, 2).tolist()} m (+/- {p.uncertainty_m or float('nan'):.2f} m, "
+              f"confidence {p.confidence:.2f}); nearest true source {err:.2f} m away")
+    return placed

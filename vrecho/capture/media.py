@@ -1,0 +1,171 @@
+"""A capture's media: a video's sound and pictures decoded with PyAV (FFmpeg's libraries), sound
+files, folders of pictures, and videos written (for simulated captures).
+"""
+
+from __future__ import annotations
+
+import itertools
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+import soundfile as sf
+from PIL import Image
+
+from ..errors import VrechoError
+
+
+def read_video(path) -> tuple[np.ndarray, int, np.ndarray]:
+    """A video's sound and the times of its pictures, decoded with PyAV (FFmpeg's libraries).
+
+    Returns the first audio stream mixed to mono (float32, its own rate), the rate (Hz), and
+    each video frame's presentation time (s, from the audio's start). One :class:`VrechoError`
+    for a file that is not a video, a codec FFmpeg cannot decode, or a video without sound."""
+    import av  # FFmpeg's libraries: only when a video is read or written
+
+    path = str(path)
+    try:
+        with av.open(path) as container:
+            if not container.streams.audio:
+                raise VrechoError(f"{path}: the video has no audio track; vrecho needs the microphone's recording "
+                                  "of its pulses (or give --audio WAV)")
+            astream = container.streams.audio[0]
+            chunks, times, a0 = [], [], None
+            streams = [astream] + list(container.streams.video[:1])
+            for packet in container.demux(streams):
+                if packet.stream.type == "video":  # its time is enough: pictures are decoded only when wanted
+                    if packet.pts is not None:
+                        times.append(float(packet.pts * packet.time_base))
+                    continue
+                for frame in packet.decode():
+                    if a0 is None:
+                        a0 = float(frame.time or 0.0)
+                    raw = frame.to_ndarray()
+                    a = raw.astype(np.float32)
+                    if frame.format.is_planar:
+                        a = a.mean(axis=0)
+                    else:  # interleaved: (1, n * channels)
+                        a = a.reshape(-1, len(frame.layout.channels)).mean(axis=1)
+                    if np.issubdtype(raw.dtype, np.integer):
+                        a /= float(np.iinfo(raw.dtype).max)
+                    chunks.append(a)
+            fs = int(astream.rate)
+    except av.FFmpegError as e:
+        raise VrechoError(f"{path}: cannot decode it ({e}); expected a video FFmpeg reads (MP4/MOV/MKV with "
+                          "H.264/HEVC and AAC/PCM/FLAC sound)") from None
+    if not chunks:
+        raise VrechoError(f"{path}: the audio track holds no samples")
+    return np.concatenate(chunks), fs, np.array(sorted(times)) - (a0 or 0.0)
+
+
+def video_images(path, times_s, width: int | None = None) -> np.ndarray:
+    """Grayscale pictures (K, H, W) uint8 of a video at the given times (s from the sound's start;
+    the picture shown then: the last one that started), decoded in one pass (FFmpeg's threads),
+    scaled to ``width`` pixels across (aspect kept) if given."""
+    import av  # FFmpeg's libraries: only when a video is read or written
+
+    times_s = np.asarray(times_s, float)
+    try:
+        return _pictures(av.open(str(path)), times_s, width)
+    except av.FFmpegError as e:
+        raise VrechoError(f"{path}: cannot decode its pictures ({e}); expected H.264 or HEVC video") from None
+
+
+def _pictures(container, times_s: np.ndarray, width: int | None) -> np.ndarray:
+    out = [None] * len(times_s)
+    order = np.argsort(times_s)
+    k, last, t0 = 0, None, None
+    with container:
+        if not container.streams.video:
+            raise VrechoError(f"{container.name}: the file has no pictures; give a video (or --audio with --images)")
+        a = container.streams.audio
+        container.streams.video[0].thread_type = "AUTO"
+        size = {}
+        for frame in container.decode(video=0):
+            if width is not None and not size:
+                size = {"width": width, "height": int(round(frame.height * width / frame.width))}
+            if t0 is None:
+                t0 = float(a[0].start_time * a[0].time_base) if a and a[0].start_time is not None else 0.0
+            t = float(frame.time) - t0
+            while k < len(order) and times_s[order[k]] < t:
+                out[order[k]] = (last if last is not None else frame).to_ndarray(format="gray", **size)
+                k += 1
+            if k == len(order):
+                break
+            last = frame  # converted only if a time falls in it
+    for j in order[k:]:
+        out[j] = last.to_ndarray(format="gray", **size)
+    return np.stack(out)
+
+
+def write_video(path, gray: np.ndarray, fps: float, audio: np.ndarray, fs: int, audio_codec: str = "flac",
+                audio_bit_rate: int = 256_000) -> None:
+    """Mux grayscale pictures (K, H, W) uint8 (an array, or any iterable of (H, W) pictures) at
+    ``fps`` and a mono sound (float in [-1, 1]) into a video file with PyAV (H.264; the sound as
+    ``audio_codec``: "flac" in MKV is lossless, "aac" in MP4 is what phones write, at
+    ``audio_bit_rate``). For simulated captures, tests and benchmarks."""
+    import av  # FFmpeg's libraries: only when a video is read or written
+
+    pictures = iter(gray)
+    first = np.asarray(next(pictures), np.uint8)
+    with av.open(str(path), "w") as container:
+        v = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1000))
+        v.width, v.height, v.pix_fmt = first.shape[1], first.shape[0], "yuv420p"
+        a = container.add_stream(audio_codec, rate=fs, layout="mono")
+        if audio_codec != "flac":
+            a.bit_rate = audio_bit_rate
+        pcm = np.clip(np.asarray(audio, np.float32), -1, 1)
+        fmt = "s16" if audio_codec == "flac" else "fltp"
+        block = 1024
+        for k in range(0, len(pcm), block):
+            chunk = pcm[k:k + block][None]
+            frame = av.AudioFrame.from_ndarray((chunk * 32767).astype(np.int16) if fmt == "s16" else chunk,
+                                               format=fmt, layout="mono")
+            frame.sample_rate, frame.pts = fs, k
+            for packet in a.encode(frame):
+                container.mux(packet)
+        for packet in a.encode(None):
+            container.mux(packet)
+        for i, g in enumerate(itertools.chain([first], pictures)):
+            frame = av.VideoFrame.from_ndarray(np.asarray(g, np.uint8), format="gray")
+            frame.pts = i
+            for packet in v.encode(frame):
+                container.mux(packet)
+        for packet in v.encode(None):
+            container.mux(packet)
+
+
+def read_audio(path) -> tuple[np.ndarray, int]:
+    """A sound file (WAV, FLAC, ...) mixed to mono, float32, and its rate."""
+    try:
+        x, fs = sf.read(str(path), dtype="float32", always_2d=True)
+    except (sf.LibsndfileError, RuntimeError) as e:
+        raise VrechoError(f"{path}: cannot read it as sound ({e}); expected WAV or FLAC") from None
+    return x.mean(axis=1), int(fs)
+
+
+def image_files(folder: Path, names: list[str] | None) -> list[Path]:
+    if not folder.is_dir():
+        raise VrechoError(f"images: {folder} is not a folder of pictures")
+    if names is None:
+        files = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
+        if not files:
+            raise VrechoError(f"images: {folder} holds no .png or .jpg pictures")
+        return files
+    files = [folder / n for n in names]
+    absent = [f.name for f in files if not f.is_file()]
+    if absent:
+        raise VrechoError(f"images: {len(absent)} of the pictures images.txt names are not in {folder} "
+                          f"(first: {absent[0]})")
+    return files
+
+
+def load_pictures(files: list[Path], width: int | None) -> np.ndarray:
+
+    out = []
+    for f in files:
+        im = Image.open(f).convert("L")
+        if width is not None:
+            im = im.resize((width, int(round(im.height * width / im.width))), Image.BILINEAR)
+        out.append(np.asarray(im, np.uint8))
+    return np.stack(out)

@@ -1,0 +1,193 @@
+"""Real captures: a phone's recording of vrecho's pulse train, cut into PROTOCOL.md's frames.
+
+The capture (PROTOCOL.md): a loudspeaker beside the camera plays a pulse train (100 ms of the
+probe, then 900 ms of silence) while the camera films; each frame is 1.0 s of microphone signal
+from a pulse's onset. A real recording does not say where its pulses are: it starts anywhere,
+the two clocks drift apart (a player's 44.1 kHz is not the recorder's), pulses are drowned by a
+door slam or lost to a dropout, the microphone clips. :func:`find_onsets` finds them:
+
+1. **Matched filter.** The recording correlated with the emitted pulse (FFT), and its envelope
+   (analytic signal): a pulse's direct sound stands out by the pulse's time-bandwidth product
+   (about 36 dB for the 100 ms probe) above noise, and clipping keeps the peak where it was.
+2. **Candidates.** The strongest lag within each half period, at least ``min_snr_db`` above the
+   envelope's median (the noise floor).
+3. **The train.** The period is measured (the median spacing of candidates 0.95 to 1.05 nominal
+   periods apart: the clocks' drift); a candidate is a pulse when another lies one to four whole
+   periods away (within ``tolerance_s`` per period): a clap or a door does not recur on the
+   period, and pulses missing on both sides of one do not lose it (nor does one alone between
+   two pauses, as loud as the train to 1.5 dB). Where two pulses lie a whole number of periods
+   apart (to a millisecond a period), the pulses between are missing; where the gap is not
+   whole (the player paused, or looped its file), the train starts again and nothing is
+   missing. A
+   stronger echo is not taken for the direct sound: the onset is the highest lag within a
+   quarter millisecond of the first, within 20 ms before the peak, whose envelope reaches half
+   of it.
+4. **Sub-sample time.** A parabola through the envelope's three samples at the peak.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import librosa
+import numpy as np
+from scipy import fft
+from scipy.ndimage import maximum_filter1d
+
+from ..errors import VrechoError
+from ..scene import MIC_ABOVE_EMITTER_M
+from ..signals import FS, PERIOD_S, SPEED_OF_SOUND, analytic_envelope, analytic_filter, parabolic_peaks, probe
+
+
+PULSE_TRAIN_WAV = Path(__file__).resolve().parent.parent / "assets" / "pulse_train.wav"
+"""The pulse train for the second phone to play (on repeat): 30 s of vrecho's probe once a
+second (:func:`~vrecho.signals.pulse_train` of :func:`~vrecho.signals.probe`), 44.1 kHz, 16-bit
+PCM. A player's gap at the loop's seam costs nothing: :func:`find_onsets` restarts the train."""
+
+
+@dataclass
+class Onsets:
+    """Pulses found in a recording.
+
+    ``samples`` (K,) where each pulse's direct sound begins (fractional samples from the
+    recording's first), ``strength_db`` (K,) its matched-filter peak above the noise floor,
+    ``missing`` (J,) where a pulse was due but none was found, ``period_s`` the train's period
+    as measured (the clocks' drift included), ``fs`` the rate.
+    """
+
+    samples: np.ndarray
+    strength_db: np.ndarray
+    missing: np.ndarray
+    period_s: float
+    fs: int
+
+    @property
+    def seconds(self) -> np.ndarray:
+        return self.samples / self.fs
+
+
+def _mono(audio, fs) -> tuple[np.ndarray, int]:
+    x = np.asarray(audio, dtype=np.float64)
+    if x.ndim == 2:  # (n, channels) or (channels, n): the first channel
+        x = x[:, 0] if x.shape[0] > x.shape[1] else x[0]
+    if x.ndim != 1 or x.size == 0:
+        raise VrechoError(f"audio: expected a 1-D recording (or channels x samples), got shape {np.shape(audio)}")
+    if not np.all(np.isfinite(x)):
+        raise VrechoError("audio: the recording holds NaN or infinite samples")
+    if not isinstance(fs, (int, np.integer)) or fs < 8000:
+        raise VrechoError(f"fs: expected an integer sample rate of at least 8000 Hz, got {fs!r}")
+    return x, int(fs)
+
+
+def matched_envelope(audio, emitted, fs: int = FS) -> np.ndarray:
+    """Envelope of the recording correlated with the emitted pulse: entry ``l`` is how much of
+    the pulse starts at sample ``l`` (length len(audio) - len(emitted) + 1)."""
+    x, fs = _mono(audio, fs)
+    s = np.asarray(emitted, dtype=np.float64)
+    if s.ndim != 1 or not 8 <= s.size <= x.size:
+        raise VrechoError(f"emitted: expected a 1-D pulse shorter than the recording ({x.size} samples), got shape {s.shape}")
+    n = fft.next_fast_len(x.size + s.size, real=True)
+    return analytic_envelope(x, analytic_filter(s, n), n)[:x.size - s.size + 1] / np.linalg.norm(s)
+
+
+def find_onsets(audio, fs: int = FS, emitted=None, period_s: float = PERIOD_S, min_snr_db: float = 12.0,
+                tolerance_s: float = 0.01) -> Onsets:
+    """The pulse train's onsets in a recording (see the module's notes).
+
+    Parameters
+    ----------
+    audio : array, shape (n,) or (n, channels)
+        The recording (the first channel is used).
+    fs : int
+        Its sample rate (Hz).
+    emitted : array, optional
+        The pulse played (default: vrecho's probe, :func:`~vrecho.signals.probe`, at ``fs``).
+    period_s : float
+        The nominal period (PROTOCOL.md: 1 s); the measured one may differ by a few per cent.
+    min_snr_db : float
+        How far above the noise floor a pulse's matched-filter peak must rise.
+    tolerance_s : float
+        How far from its due time a pulse may be (per period of a gap).
+
+    Raises
+    ------
+    VrechoError
+        When no pulse train is found (fewer than two pulses a period apart).
+    """
+    x, fs = _mono(audio, fs)
+    s = probe(fs) if emitted is None else np.asarray(emitted, dtype=np.float64)
+    if not 0.1 <= period_s <= 10:
+        raise VrechoError(f"period_s: expected 0.1 to 10 s, got {period_s}")
+    env = matched_envelope(x, s, fs)
+    period = period_s * fs
+    floor = float(np.median(env)) + 1e-12
+    half = max(int(period // 2), 1)
+    peaks = np.flatnonzero((env == maximum_filter1d(env, half, mode="nearest")) & (env > floor * 10 ** (min_snr_db / 20)))
+    if len(peaks) < 2:
+        raise VrechoError(f"audio: no pulse train found ({len(peaks)} pulse(s) {min_snr_db:.0f} dB above the noise "
+                          f"in {x.size / fs:.1f} s); expected vrecho's pulse every {period_s:g} s")
+    # The train: candidates with another a whole number of periods away (up to four: pulses may be
+    # missing on both sides); a clap or a door does not recur on the period.
+    tol = tolerance_s * fs
+    pairs = [(j, peaks[j:] - peaks[:-j]) for j in range(1, len(peaks)) if (peaks[j:] - peaks[:-j]).min() < 4.5 * period]
+    near = np.concatenate([d[(d > 0.95 * period) & (d < 1.05 * period)] for _, d in pairs])
+    period = float(np.median(near)) if len(near) else period  # the clocks' drift, measured
+    support = np.zeros(len(peaks), bool)
+    for j, d in pairs:
+        m = np.round(d / period)
+        ok = (m >= 1) & (m <= 4) & (np.abs(d - m * period) <= tol * np.maximum(m, 1))
+        support[j:] |= ok
+        support[:-j] |= ok
+    # The direct sound comes as loud every time (the loudspeaker stays beside the microphone):
+    # two noise peaks that happen to lie periods apart are far weaker than the train, and a
+    # pulse alone between two pauses is as strong as the rest.
+    if support.any():
+        level = np.median(env[peaks[support]])
+        support = (support & (env[peaks] >= 0.1 * level)) | (np.abs(20 * np.log10(env[peaks] / level)) <= 1.5)
+    idx = peaks[support]
+    if len(idx) < 2:
+        raise VrechoError(f"audio: no pulse train found: pulses do not recur every {period_s:g} s "
+                          f"(within {tolerance_s * 1000:.0f} ms)")
+    # The direct sound is the first strong arrival: an echo may outdo it by a little.
+    lead, lobe = int(0.02 * fs), max(int(0.00025 * fs), 3)  # a quarter millisecond: past the main lobe, before any echo
+    for j, i in enumerate(idx):
+        w = env[max(i - lead, 0):i + 1]
+        first = max(i - lead, 0) + int(np.flatnonzero(w >= 0.5 * env[i])[0])
+        idx[j] = first + int(np.argmax(env[first:first + lobe]))  # that arrival's own peak
+    samples = parabolic_peaks(env, idx)
+    gaps = np.diff(samples)
+    k = np.round(gaps / period)
+    whole = (k >= 1) & (np.abs(gaps - k * period) <= tol * np.maximum(k, 1))
+    period = float(np.median(gaps[whole] / k[whole])) if whole.any() else period
+    # Missing pulses: where two found lie a whole number of periods apart, to a millisecond a
+    # period (the player's clock keeps the beat to a sample); any other gap (the player paused,
+    # or looped its file) starts the train again and misses nothing.
+    k = np.round(gaps / period).astype(int)
+    missing = [a + j * g / m for a, g, m in zip(samples, gaps, k)
+               if m >= 2 and abs(g - m * period) <= 0.001 * fs * m for j in range(1, m)]
+    return Onsets(samples, 20 * np.log10(env[idx] / floor), np.array(missing), period / fs, fs)
+
+
+def cut_frames(audio, onsets: Onsets, length_s: float = 1.0, mic_offset_m: float | None = None) -> np.ndarray:
+    """PROTOCOL.md's frames: ``length_s`` of the recording from each pulse's emission (the direct
+    sound's onset less its flight from the loudspeaker, ``mic_offset_m`` away: PROTOCOL's device
+    by default), resampled to 44.1 kHz, each shifted by its fraction of a sample (a linear phase)
+    so that sample 0 is the emission. Frames that would run past the recording's end are left
+    out. Returns (K, n) float32."""
+    x, fs = _mono(audio, onsets.fs)
+    offset = MIC_ABOVE_EMITTER_M if mic_offset_m is None else mic_offset_m
+    starts = (onsets.samples - offset / SPEED_OF_SOUND * fs) * FS / fs
+    if fs != FS:
+        x = librosa.resample(x, orig_sr=fs, target_sr=FS)
+    n, pad = int(round(length_s * FS)), 64
+    frames = []
+    for t in starts:
+        i = int(np.floor(t))
+        if i - pad < 0 or i + n + pad > x.size:
+            continue
+        seg = x[i - pad:i + n + pad]
+        f = np.fft.rfftfreq(seg.size)
+        seg = np.fft.irfft(np.fft.rfft(seg) * np.exp(2j * np.pi * f * (t - i)), seg.size)  # advance by the fraction
+        frames.append(seg[pad:pad + n])
+    return np.array(frames, np.float32).reshape(-1, n)

@@ -1,0 +1,164 @@
+"""A real capture from files to answers: :func:`open_capture` reads and checks what the user gives
+(a video or a sound file, pictures, COLMAP's poses, the mesh), :func:`analyse` finds the pulses,
+cuts PROTOCOL.md's frames, asks EchoCNN about each (the probe known) and, with poses and a mesh,
+repairs the mesh as ``vrecho reconstruct`` does. ``vrecho capture`` (:func:`vrecho.app.capture`)
+writes what they find.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..camera import crop_view
+from ..colmap import image_times
+from ..errors import VrechoError
+from ..io import read_mesh
+from ..reconstruct import LABELS, Reconstruction, facing, reconstruct
+from ..signals import FS, probe
+from .media import image_files, load_pictures, read_audio, read_video, video_images
+from .onsets import Onsets, cut_frames, find_onsets
+from .posing import VIEW_WIDTH, Poses, posed_scan, read_poses
+
+
+@dataclass
+class Recording:
+    """A capture as read by :func:`open_capture`: the sound ``audio`` (mono) at ``fs`` Hz, the
+    ``video`` it came from (None for a sound file) and when its first picture shows
+    (``video_start_s``), the pictures' ``files`` (with a sound file), COLMAP's ``poses`` and the
+    user's ``mesh`` (in the poses' z-up world), and the options of the analysis."""
+
+    audio: np.ndarray
+    fs: int
+    video: Path | None = None
+    video_start_s: float = 0.0
+    files: list[Path] | None = None
+    image_fps: float | None = None
+    poses: Poses | None = None
+    mesh: object = None  # open3d.geometry.TriangleMesh
+    labels: str = "echocnn"
+    emitter_distance_m: float | None = None
+
+
+@dataclass
+class Analysis:
+    """What :func:`analyse` found: ``onsets``, the ``frames`` cut (K, 44100) and their ``times``
+    (s), one answer per frame in ``rows`` (the columns of ``frames.csv``), the picture at each
+    frame (``frame_pictures``, or None), and the repair (``result``, with poses and a mesh)."""
+
+    onsets: Onsets
+    frames: np.ndarray
+    times: np.ndarray
+    rows: list[dict]
+    frame_pictures: np.ndarray | None
+    result: Reconstruction | None
+
+
+def open_capture(video=None, audio=None, images=None, poses=None, mesh=None, *, image_fps: float | None = None,
+                 labels: str = "echocnn", emitter_distance_m: float | None = None) -> Recording:
+    """Read and check a capture (every check before any work; see :func:`vrecho.app.capture`).
+
+    Parameters
+    ----------
+    video : path, optional
+        A video with its sound (PyAV: MP4, MOV, MKV); or ``audio``, a sound file, with its
+        pictures in the folder ``images`` (optional).
+    poses : path, optional
+        COLMAP's text model of the pictures, numbered from 1 at ``image_fps`` (pictures per
+        second); with ``mesh`` (.ply or .obj, in the poses' world; a y-up world is turned z up).
+    labels : {"echocnn", "echocnn-only"}
+        Who decides what each hole of the mesh is.
+    emitter_distance_m : float, optional
+        From the loudspeaker to the microphone (PROTOCOL.md's 7 cm by default).
+    """
+    if (video is None) == (audio is None):
+        raise VrechoError("capture: give a video, or --audio with a sound file (not both)")
+    if images is not None and video is not None:
+        raise VrechoError("capture: --images goes with --audio (a video's pictures are its own)")
+    if (poses is None) != (mesh is None):
+        raise VrechoError("capture: --poses and --mesh go together (COLMAP's poses of the pictures, and the mesh)")
+    if (poses is not None or images is not None) and image_fps is None:
+        raise VrechoError("capture: --poses and --images need --image-fps, the rate the pictures were extracted at")
+    if poses is not None and video is None and images is None:
+        raise VrechoError("capture: --poses needs the pictures: a video, or --audio with --images")
+    if labels not in LABELS:
+        raise VrechoError(f"labels: expected one of {tuple(LABELS)}, got {labels!r}")
+    if emitter_distance_m is not None and not 0 <= emitter_distance_m <= 3:
+        raise VrechoError(f"emitter-distance: expected 0 to 3 m from the loudspeaker to the microphone, "
+                          f"got {emitter_distance_m}")
+    if audio is not None:
+        x, fs = read_audio(audio)
+        video_start = 0.0
+    else:
+        x, fs, vtimes = read_video(video)
+        video_start = float(vtimes[0]) if len(vtimes) else 0.0
+    posed = user_mesh = None
+    if poses is not None:
+        posed = read_poses(poses, image_fps, x.size / fs, video_start)
+        user_mesh = read_mesh(mesh).transform(posed.to_z_up)
+    files = image_files(Path(images), None if posed is None else posed.names) if images is not None else None
+    return Recording(x, fs, None if video is None else Path(video), video_start, files, image_fps, posed, user_mesh,
+                     labels, emitter_distance_m)
+
+
+def answers(classifier, frames: np.ndarray, emitted: np.ndarray, images=None) -> list[dict]:
+    """EchoCNN's answers for frames (K, 44100) at 44.1 kHz, the probe ``emitted`` known (and the
+    crops ``images`` (K, 64, 25), if given), as ``frames.csv``'s columns."""
+    preds = classifier.predict_batch(frames, FS, images=images, emitted=emitted) if len(frames) else []
+    return [{"model": p.model, "open": p.is_open, "material": "-" if p.is_open else p.material,
+             "depth_m": round(float(p.depth_m), 4), "p_open": round(p.probabilities["open"], 4),
+             "p_mirror": round(p.probabilities["mirror"], 4), "confidence": round(p.confidence, 4),
+             "flags": " ".join(p.flags)} for p in preds]
+
+
+def analyse(rec: Recording, *, classifier=None, progress: bool = False) -> Analysis:
+    """The pulses of a capture (:func:`~.onsets.find_onsets`), its frames
+    (:func:`~.onsets.cut_frames`) and EchoCNN's answer to each, the probe known (EchoCNN-E);
+    with poses and a mesh, each frame takes the pose of its pulse, the frames that face a hole
+    of the mesh are asked again with the camera's crop around it (EchoCNN-EV, PROTOCOL.md's
+    64 x 25) and the mesh is repaired (:func:`vrecho.reconstruct.reconstruct`)."""
+    if classifier is None:
+        from ..classifier import load_classifier  # torch-bound (1.7 s): only when EchoCNN is asked
+
+        classifier = load_classifier()
+    x, fs, posed = rec.audio, rec.fs, rec.poses
+    onsets = find_onsets(x, fs)
+    frames = cut_frames(x, onsets, mic_offset_m=rec.emitter_distance_m)
+    if not len(frames):
+        raise VrechoError("capture: no pulse has a whole second of recording after it")
+    times = onsets.seconds[:len(frames)]
+    width = VIEW_WIDTH if posed is not None else None
+    if rec.video is not None:
+        shots = video_images(rec.video, np.r_[times, posed.time_s if posed is not None else []], width)
+        frame_pictures, pictures = shots[:len(times)], shots[len(times):]
+    elif rec.files is not None:
+        file_times = posed.time_s if posed is not None else image_times([f.name for f in rec.files], rec.image_fps)
+        pictures = load_pictures(rec.files, width)
+        frame_pictures = pictures[np.argmin(np.abs(times[:, None] - file_times[None]), axis=1)]
+    else:
+        pictures = frame_pictures = None
+    emitted = probe(FS)
+    rows = [{"frame": k, "time_s": round(float(t), 6)} | a
+            for k, (t, a) in enumerate(zip(times, answers(classifier, frames, emitted)))]
+    result = None
+    if posed is not None:
+        scan, ok = posed_scan(rec.mesh, posed, pictures, frames, times, frame_pictures, emitted)
+        result = reconstruct(scan, decide=rec.labels, classifier=classifier)
+        if result.holes and not any(d.frames for d in result.decisions):  # only pulses' views have echoes
+            raise VrechoError(f"capture: the mesh has {len(result.holes)} hole(s) and no pulse was played facing one "
+                              "(within 25 degrees of its normal, 0.25 to 3.5 m away); film each glass, mirror or "
+                              "opening from in front while the pulses play")
+        views, first = scan.views, len(posed.pose)
+        frame_of = dict(zip(range(first, len(views)), np.flatnonzero(ok)))
+        for k, v in zip(np.flatnonzero(ok), views[first:]):
+            rows[k].update(x_m=round(float(v.pose[0, 3]), 4), y_m=round(float(v.pose[1, 3]), 4),
+                           z_m=round(float(v.pose[2, 3]), 4))
+        for h, hole in enumerate(result.holes):  # frames facing a hole: asked again with the crop around it
+            for i in facing(views, hole):
+                if i in frame_of and "hole" not in rows[frame_of[i]]:
+                    crop, inside = crop_view(views[i], hole.corners())
+                    a = answers(classifier, frames[frame_of[i]][None], emitted, crop[None] if inside >= 0.98 else None)[0]
+                    rows[frame_of[i]].update(a, hole=h)
+    return Analysis(onsets, frames, times, rows, frame_pictures, result)

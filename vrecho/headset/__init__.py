@@ -1,0 +1,14 @@
+"""The headset call: warn before the wearer walks into glass, a mirror or a wall.
+
+- :class:`BoundaryMonitor` (boundary.py): the echo ranging of a full-duplex audio callback, its
+  alerts and their hysteresis; the surfaces it follows are :class:`~.tracks.Track` (tracks.py).
+- :func:`look` (view.py): what the headset's camera says of a surface an echo found (wall, glass
+  or mirror), shown to the monitor with :meth:`BoundaryMonitor.see`.
+
+Nothing here imports torch until a camera frame is classified: the audio path starts fast.
+"""
+
+from .boundary import Alert, BoundaryMonitor, ranging_probe
+from .view import SurfaceView, load_model, look, look_all, pane_crop
+
+__all__ = ["Alert", "BoundaryMonitor", "SurfaceView", "load_model", "look", "look_all", "pane_crop", "ranging_probe"]

@@ -1,0 +1,156 @@
+"""A surface the headset's echoes follow over pulses (:class:`Track`): its distance and closing
+speed (an alpha-beta filter), whether it lies in the wearer's way (the closest point of approach,
+:meth:`Track.in_the_way`) or is a second-order echo passing by (:meth:`Track.explained_by`), and
+what the headset's camera made of it. :class:`~vrecho.headset.BoundaryMonitor` keeps them.
+"""
+
+from __future__ import annotations
+
+import bisect
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Track:
+    times: deque = field(default_factory=lambda: deque(maxlen=64))
+    dists: deque = field(default_factory=lambda: deque(maxlen=64))
+    strengths: deque = field(default_factory=lambda: deque(maxlen=64))
+    approached_at: float = -np.inf
+    speed: float | None = None  # d distance / dt (negative: approaching), an alpha-beta filter's
+    ahead: bool | None = None  # in the wearer's way, at the last update (None: cannot tell yet)
+    d_hat: float = 0.0
+    views: dict = field(default_factory=dict)  # what the camera made of it: surface -> summed confidence
+
+    @property
+    def surface(self) -> str:
+        return max(self.views, key=self.views.get) if self.views else "closed"
+
+    def predict(self, t: float) -> float:
+        return self.d_hat + (self.speed or 0.0) * (t - self.times[-1])
+
+    def update(self, t: float, d: float, strength: float, alpha: float = 0.6, beta: float = 0.3) -> None:
+        """An alpha-beta filter of distance and speed (it follows a wearer who starts or stops
+        walking within a few pulses), and the raw history."""
+        if not self.times:
+            self.d_hat, self.speed = d, None
+        else:
+            dt = t - self.times[-1]
+            if self.speed is None:  # the second echo: the speed from the two (a fast walk's echo moves ~8 cm a pulse)
+                self.d_hat, self.speed = d, (d - self.d_hat) / max(dt, 1e-3)
+            else:
+                predicted = self.predict(t)
+                r = d - predicted
+                self.d_hat = predicted + alpha * r
+                self.speed += beta * r / max(dt, 1e-3)
+        self.times.append(t)
+        self.dists.append(d)
+        self.strengths.append(strength)
+
+    def _history(self, extra=None):
+        """The track's times and distances, with one more point ``extra`` = (t, d) if given."""
+        if extra is None:
+            return self.times, self.dists
+        return [*self.times, extra[0]], [*self.dists, extra[1]]
+
+    def explained_by(self, offsets: list[float], span_s: float = 0.6, extra=None) -> bool:
+        """Whether the track is better read as a second-order echo that passes by at one of
+        ``offsets`` (the distances of surfaces that stay put: floor, ceiling, side walls; a
+        wall's echo by way of the ceiling nears like a point that far overhead) than as a
+        surface straight ahead: sqrt(d^2 - a^2) is then the one that falls linearly. ``extra``:
+        one more point (t, d) after the history."""
+        times, dists = self._history(extra)
+        t = np.fromiter(times, float, len(times))
+        first = int(np.searchsorted(t, t[-1] - span_s))
+        if len(t) - first < 8 or not offsets:
+            return False
+        d = np.fromiter(dists, float, len(dists))[first:]
+        a = np.array([o for o in offsets if o < d.min() - 0.02])
+        if not len(a):
+            return False
+        tc = t[first:] - t[first:].mean()
+
+        def residual(x):  # mean square about each row's straight line in time
+            xc = x - x.mean(axis=-1, keepdims=True)
+            return np.maximum((xc * xc).mean(axis=-1) - (xc @ tc / len(tc)) ** 2 / (tc @ tc / len(tc)), 0.0)
+
+        frontal = residual(d)
+        return bool(np.any(residual(np.sqrt(d ** 2 - a[:, None] ** 2)) < 0.49 * frontal))  # rms below 0.7 of it
+
+    def ahead_with(self, t: float, d: float, miss_m: float, still: list[float]) -> bool:
+        """Whether the surface is in the way (:meth:`in_the_way`, not :meth:`explained_by` a
+        surface that stays put) with one more echo ``d`` at ``t``, the history left as it is."""
+        return bool(self.in_the_way(miss_m, extra=(t, d))) and not self.explained_by(still, extra=(t, d))
+
+    def closed_in(self, span_s: float) -> float:
+        """How much nearer the surface came over the last ``span_s`` (0 until the track is that old)."""
+        t = self.times
+        if t[-1] - t[0] < 0.6 * span_s:
+            return 0.0
+        k = max(bisect.bisect_right(t, t[-1] - span_s) - 1, 0)
+        return float(self.dists[k] - self.dists[-1])
+
+    def in_the_way(self, miss_m: float, spans_s=(0.6, 0.45, 0.32), extra=None) -> bool | None:
+        """Whether the wearer will pass within ``miss_m`` of the surface (closest point of
+        approach). A point at lateral offset ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, a
+        quadratic in t (fitted to the last ``span_s``) whose minimum is a^2; a surface straight
+        ahead has a = 0. True when a^2 lies below miss_m^2 by two standard errors of the fit
+        (and not far below 0, which no steady motion gives), False when above by two, None while
+        it cannot tell (a short track, a far surface: the minimum is then an extrapolation, and a
+        head's bob hides the curvature). The longest of ``spans_s`` that tells answers (a track
+        may have picked up another echo's history where the two crossed). ``extra``: one more
+        point (t, d) after the history."""
+        times, dists = self._history(extra)
+        # One backward pass in plain floats over the last points (some 15 a span), keeping each
+        # span's sums as the pass reaches its first point.
+        t_last = times[-1]
+        sums = {}
+        acc = [0.0] * 9  # n, sum t, t^2, t^3, t^4, y, t y, t^2 y, y^2 (t from the last point, y = d^2)
+        bounds = sorted(spans_s)
+        for t, d in zip(reversed(times), reversed(dists)):
+            u = t - t_last
+            while bounds and t < t_last - bounds[0]:  # past the shortest open span's start
+                sums[bounds.pop(0)] = (tuple(acc), -prev_u)
+            if not bounds:
+                break
+            u2, y = u * u, d * d
+            acc[0] += 1.0
+            acc[1] += u
+            acc[2] += u2
+            acc[3] += u2 * u
+            acc[4] += u2 * u2
+            acc[5] += y
+            acc[6] += u * y
+            acc[7] += u2 * y
+            acc[8] += y * y
+            prev_u = u
+        for span_s in bounds:  # spans longer than the track
+            sums[span_s] = (tuple(acc), -prev_u)
+        for span_s in spans_s:
+            (n, s1, s2, s3, s4, b0, b1, b2, yy), reach = sums[span_s]
+            if reach < 0.9 * span_s or n < 8:
+                continue
+            # Least squares of y on (t^2, t, 1): the normal equations' matrix ((s4, s3, s2),
+            # (s3, s2, s1), (s2, s1, n)) is symmetric: its cofactors over its determinant are its inverse.
+            c00, c01, c02 = s2 * n - s1 * s1, -(s3 * n - s1 * s2), s3 * s1 - s2 * s2
+            c11, c12, c22 = s4 * n - s2 * s2, -(s4 * s1 - s3 * s2), s4 * s2 - s3 * s3
+            det = s4 * c00 + s3 * c01 + s2 * c02
+            if abs(det) < 1e-18:
+                continue
+            inv = ((c00 / det, c01 / det, c02 / det), (c01 / det, c11 / det, c12 / det), (c02 / det, c12 / det, c22 / det))
+            xy = (b2, b1, b0)
+            p2, p1, p0 = (sum(r[k] * xy[k] for k in range(3)) for r in inv)
+            if p2 <= 1e-3:  # not nearing at a steady pace (starting, stopping): cannot tell yet
+                continue
+            rss = max(yy - (p2 * b2 + p1 * b1 + p0 * b0), 0.0)
+            g = (p1 ** 2 / (4 * p2 ** 2), -p1 / (2 * p2), 1.0)
+            var = sum(g[r] * inv[r][c] * g[c] for r in range(3) for c in range(3)) * rss / max(n - 3, 1)
+            a2 = p0 - p1 ** 2 / (4 * p2)
+            sigma = max(var, 0.0) ** 0.5
+            if -miss_m ** 2 < a2 - 2 * sigma and a2 + 2 * sigma < miss_m ** 2:  # far below 0 is a misfit
+                return True
+            if a2 - 2 * sigma > miss_m ** 2:
+                return False
+        return None

@@ -1,0 +1,213 @@
+"""What each hole is: open, or closed glass or mirror, and at what depth.
+
+:func:`infer` asks EchoCNN about the frames that look at a hole (:func:`~.discontinuities.facing`)
+and, by default, adds what the scan knows by physics (the echo's expected delay and its level
+there, the mirror test by reflection, :func:`mirror_evidence`). The ways to decide are a registry,
+:data:`LABELS`, as pyroomacoustics' ``doa.algorithms`` is: a name maps to a class whose instances
+are called with the holes, the frames and what the device heard. A decider of one's own (the
+simulator's oracle, :class:`vrecho.sim.scoring.Oracle`) has the same call; its ``hears``
+attribute says whether it needs the recordings.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..camera import View, crop_view, device_pose
+from ..features import echo_at
+from .discontinuities import Hole, Plane, facing, seen_through
+from .scan import Echoes
+
+
+@dataclass
+class Decision:
+    """What a hole is judged to be: ``state`` closed, open or unknown (no frame looked at it),
+    ``material`` (glass or mirror, for closed holes), ``offset_m`` (the plane of the surface:
+    points x with normal . x + offset = 0, normal into the room), ``p_closed``, ``p_mirror``,
+    ``confidence`` (probability of the answer given), ``source`` (echocnn or oracle) and the
+    per-frame inferences it was combined from, and the scan's ``evidence`` (see :func:`infer`)."""
+
+    state: str
+    material: str | None
+    offset_m: float | None
+    p_closed: float
+    p_mirror: float
+    confidence: float
+    source: str
+    frames: list[dict] = field(default_factory=list)
+    evidence: dict = field(default_factory=dict)
+
+
+ECHO_CLOSED_DB = -2.5
+"""Level (dB, :func:`~vrecho.features.echo_at`) at the scanned plane's delay above which the
+echo says closed. Set on the living room and rooms of seeds 1000 and 3000 (not the benchmark's):
+the frames' :data:`ECHO_QUANTILE` level reads -0.4 to 4.5 dB on 25 closed surfaces, -5.4 to -30
+dB on 14 openings."""
+
+
+ECHO_QUANTILE = 0.2
+"""Which of the frames' levels speaks for a hole: a low one. Another surface's echo arriving
+with the hole's (the floor's, the wall behind the device) only adds sound, so an opening's
+silence shows in the frames it does not mask, while a closed surface echoes in every frame."""
+
+
+ECHO_SLOPE_DB = 1.0
+"""Width of the logistic around :data:`ECHO_CLOSED_DB`: 2.5 dB off it is 92 % one way."""
+
+
+MIRROR_SHARE = 0.15
+"""Share of seen-through geometry that, reflected, lands on the room: above it, a mirror (the
+living room: mirror 0.27, window 0.006, opening 0.04)."""
+
+
+def _logit(p: float) -> float:
+    p = float(np.clip(p, 1e-4, 1 - 1e-4))
+    return float(np.log(p / (1 - p)))
+
+
+def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=None, mesh=None, walls=(),
+          use_scan: bool = True, min_crop_inside: float = 0.98, max_frames: int = 6) -> list[Decision]:
+    """vrecho's answer for each hole, from the frames that look at it (:func:`facing`).
+
+    Each frame's recording goes to EchoCNN with the known probe (EchoCNN-E), and with the
+    camera's crop around the hole when the frame holds all of it (EchoCNN-EV). Up to
+    ``max_frames`` frames per hole, the most frontal first, are combined.
+
+    With ``use_scan`` (vrecho's choice) the scan adds what it knows, by physics: the wall around
+    the hole is scanned, so the delay of a closed surface's echo is known; the level there
+    (:func:`~vrecho.features.echo_at`, a low quantile, :data:`ECHO_QUANTILE`, over the frames
+    whose specular point, the foot of the emitter's perpendicular, falls in the hole; a logistic
+    around :data:`ECHO_CLOSED_DB`)
+    joins EchoCNN's open/closed log-odds, and the depth comes from the
+    EchoCNN echo when it agrees with the scan within 10 cm, else from the echo nearest the
+    scan's delay. The geometry seen through the hole, reflected in its plane
+    (:func:`mirror_evidence`), says mirror or not where it is clear; EchoCNN's material answers
+    otherwise. Without ``use_scan``: EchoCNN alone (probabilities averaged, depth the median
+    of the frames' EchoCNN depths weighted by their closed probability).
+    """
+    if classifier is None:
+        from ..classifier import load_classifier  # torch-bound (1.7 s): only when EchoCNN is asked
+
+        classifier = load_classifier()
+    cameras = np.array([v.pose[:3, 3] for v in views])
+    out = []
+    for hole in holes_:
+        n = hole.plane.normal
+        frames = [i for i in facing(views, hole) if echoes.of(i) is not None]
+        frames = sorted(frames, key=lambda i: float(n @ views[i].pose[:3, 2]))[:max_frames]
+        if not frames:
+            out.append(Decision("unknown", None, None, 0.5, 0.5, 0.0, "echocnn"))
+            continue
+        rows = []
+        for i in frames:
+            image, inside = crop_view(views[i], hole.corners())
+            audio = echoes.of(i)
+            pred = classifier.predict(audio, echoes.fs, image=image if inside >= min_crop_inside else None,
+                                      emitted=echoes.emitted)
+            pose = device_pose(views[i])
+            scan_depth = float(n @ pose.emitter + hole.plane.offset)
+            row = {"frame": i, "model": pred.model, "p_closed": pred.probabilities["closed"],
+                   "p_mirror": pred.probabilities["mirror"], "echo_depth_m": pred.depth_m, "scan_depth_m": scan_depth}
+            if use_scan:
+                row["echo_level_db"], row["echo_at_scan_m"] = echo_at(audio, echoes.emitted, scan_depth, echoes.fs)
+                row["depth_m"] = pred.depth_m if abs(pred.depth_m - scan_depth) < 0.1 else row["echo_at_scan_m"]
+                # The specular echo comes from the foot of the perpendicular: only where it falls in
+                # the hole does the echo speak of the hole (else of the wall beside it).
+                foot = pose.emitter - scan_depth * n
+                row["foot_in_hole"] = bool(hole.contains(foot[None], -0.05)[0])
+            else:
+                row["depth_m"] = pred.depth_m
+            row["offset_m"] = row["depth_m"] - float(n @ pose.emitter)
+            rows.append(row)
+        p_closed = float(np.mean([r["p_closed"] for r in rows]))
+        p_mirror = float(np.mean([r["p_mirror"] for r in rows]))
+        evidence = {}
+        if use_scan:
+            levels = [r["echo_level_db"] for r in rows if r["foot_in_hole"]]
+            if levels:
+                level = float(np.quantile(levels, ECHO_QUANTILE))
+                p_echo = 1 / (1 + np.exp(-(level - ECHO_CLOSED_DB) / ECHO_SLOPE_DB))
+                p_closed = float(1 / (1 + np.exp(-(_logit(p_closed) + _logit(p_echo)))))
+                evidence.update(echo_level_db=level, echo_frames=len(levels), echo_levels_db=levels)
+            if mesh is not None:
+                share, count = mirror_evidence(mesh, hole, walls, cameras)
+                evidence.update(mirrored_share=share, seen_through_vertices=count)
+                if count >= 200:  # enough seen through to judge
+                    p_mirror = 0.97 if share >= MIRROR_SHARE else 0.03
+                elif count < 50:  # nothing behind it: a mirror always shows its phantom; clear glass shows nothing
+                    p_mirror = 0.1
+        offsets = np.array([r["offset_m"] for r in rows])
+        weights = np.array([r["p_closed"] for r in rows]) + 1e-6
+        order = np.argsort(offsets)
+        cum = np.cumsum(weights[order])
+        offset = float(offsets[order][np.searchsorted(cum, cum[-1] / 2)])
+        closed = p_closed >= 0.5
+        out.append(Decision("closed" if closed else "open", ("mirror" if p_mirror >= 0.5 else "glass") if closed else None,
+                            offset if closed else None, p_closed, p_mirror, max(p_closed, 1 - p_closed),
+                            "echocnn+scan" if use_scan else "echocnn", rows, evidence))
+    return out
+
+
+def mirror_evidence(mesh, hole: Hole, walls: list[Plane], cameras: np.ndarray, tolerance_m: float = 0.06,
+                    shifts_m: np.ndarray = np.arange(-0.06, 0.061, 0.02)) -> tuple[float, int]:
+    """How much of what the camera saw through a hole is the room itself, mirrored.
+
+    A mirror's phantom is the room reflected in the mirror's plane: reflected back, it lands on
+    the scanned room. What lies beyond glass or an opening does not. Returns the share of the
+    seen-through vertices that, reflected, fall within ``tolerance_m`` of the scan's own
+    surfaces (in front of every wall), and how many vertices were seen through. A mirror hangs a
+    few centimetres off its wall, and a scanned surface lies within a voxel of the truth (the
+    reflection is off by twice the plane's error): the mirror's plane is tried at the wall's
+    plane moved by each of ``shifts_m`` (positive: toward the room), and the best share counts (on the
+    tuning rooms of seeds 1000 and 3000: openings 0.09 at most, glass 0.06, mirrors 0.19 and
+    above).
+    """
+    v = np.asarray(mesh.vertices)
+    through = v[seen_through(v, hole, cameras)]
+    if len(through) < 50:
+        return 0.0, int(len(through))
+    room = np.ones(len(v), bool)
+    for w in walls:
+        room &= v @ w.normal + w.offset > -0.05
+    n = hole.plane.normal
+    tree = cKDTree(v[room])
+    shares = []
+    for offset in hole.plane.offset + np.asarray(shifts_m):
+        dist, _ = tree.query(through - 2 * (through @ n + offset)[:, None] * n, distance_upper_bound=tolerance_m)
+        shares.append(float(np.mean(np.isfinite(dist))))
+    return max(shares), int(len(through))
+
+
+class EchoCNNOnly:
+    """EchoCNN alone (``labels="echocnn-only"``): its answers averaged over the frames facing
+    each hole (:func:`infer` without the scan's evidence). ``classifier``: the shipped one by
+    default. Called as every decider is: ``decider(holes, views, echoes, mesh=..., walls=...)``."""
+
+    label = "echocnn-only"
+    use_scan = False
+    hears = True
+    """Deciders that read the recordings say so: the pipeline hears the frames for them."""
+
+    def __init__(self, classifier=None):
+        self.classifier = classifier
+
+    def __call__(self, holes: list[Hole], views: list[View], echoes: Echoes, *, mesh=None,
+                 walls: list[Plane] = ()) -> list[Decision]:
+        return infer(holes, views, echoes, classifier=self.classifier, mesh=mesh, walls=walls, use_scan=self.use_scan)
+
+
+class EchoCNNWithScan(EchoCNNOnly):
+    """vrecho's choice (``labels="echocnn"``): EchoCNN with what the scan adds by physics (see
+    :func:`infer`)."""
+
+    label = "echocnn"
+    use_scan = True
+
+
+LABELS: dict[str, type[EchoCNNOnly]] = {cls.label: cls for cls in (EchoCNNWithScan, EchoCNNOnly)}
+"""Who decides what each hole is, by name: ``echocnn`` (EchoCNN with the scan's evidence, vrecho's
+choice) and ``echocnn-only``. The truth (``oracle``) is the simulator's
+(:class:`vrecho.sim.scoring.Oracle`): it is passed as a decider, not named here."""

@@ -1,0 +1,169 @@
+"""A capture the reconstruction works on: the camera's frames, the mesh fused from them (or the
+user's own) and, where the device listened, its recordings (:class:`Echoes`).
+
+:func:`fuse` is open3d's TSDF fusion (``VoxelBlockGrid``; the legacy ``ScalableTSDFVolume``
+returns empty meshes on open3d 0.20); :func:`load_scan` reads a user's scan folder and
+:meth:`Scan.save` writes one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from ..camera import DEPTH_MAX_M, View
+from ..errors import VrechoError
+from ..io import ensure_writable_dir, read_mesh
+
+
+@dataclass
+class Echoes:
+    """The device's recordings of its own probe: ``audio`` (K, n) 1 s frames at ``fs`` Hz from the
+    pulse onset, heard at the walkthrough frames ``frame`` (K,), and the ``emitted`` probe."""
+
+    frame: np.ndarray
+    audio: np.ndarray
+    fs: int
+    emitted: np.ndarray
+
+    def __post_init__(self):
+        self.frame = np.asarray(self.frame, int).reshape(-1)
+        self.audio = np.atleast_2d(np.asarray(self.audio, np.float32))
+        if len(self.frame) != len(self.audio):
+            raise VrechoError(f"echoes: {len(self.frame)} frame indices for {len(self.audio)} recordings")
+
+    def of(self, frame: int) -> np.ndarray | None:
+        k = np.flatnonzero(self.frame == frame)
+        return self.audio[k[0]] if len(k) else None
+
+
+@dataclass
+class Scan:
+    """A capture: the camera's frames (:class:`~vrecho.camera.View`), the mesh fused from them
+    (or the user's own) and, when the device listened, its :class:`Echoes`."""
+
+    views: list[View]
+    mesh: object  # open3d.geometry.TriangleMesh
+    echoes: Echoes | None = None
+
+    @property
+    def cameras(self) -> np.ndarray:
+        return np.array([v.pose[:3, 3] for v in self.views])
+
+    def save(self, folder: str | Path) -> Path:
+        """Write the scan in the documented folder format (see :func:`load_scan`)."""
+        import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
+
+        folder = ensure_writable_dir(Path(folder))
+        np.savez_compressed(folder / "frames.npz", depth=np.stack([v.depth for v in self.views]),
+                            gray=np.stack([v.gray for v in self.views]), pose=np.stack([v.pose for v in self.views]),
+                            intrinsics=self.views[0].intrinsics)
+        o3d.io.write_triangle_mesh(str(folder / "mesh.ply"), self.mesh)
+        if self.echoes is not None:
+            e = self.echoes
+            np.savez_compressed(folder / "echoes.npz", frame=e.frame, audio=e.audio, fs=e.fs, emitted=e.emitted)
+        return folder
+
+
+def fuse(views: list[View], voxel_m: float = 0.03, trunc_voxels: float = 4.0, weight_threshold: float = 1.0,
+         progress: bool = False):
+    """TSDF fusion of depth and grayscale frames into a coloured triangle mesh.
+
+    Parameters
+    ----------
+    views : list of :class:`vrecho.camera.View`
+    voxel_m : float
+        Voxel size in metres.
+    trunc_voxels : float
+        Truncation distance in voxels.
+    weight_threshold : float
+        Fewest observations for a surface to be kept.
+
+    Returns
+    -------
+    open3d.geometry.TriangleMesh
+        Legacy mesh, world frame (Z up), vertex colours from the grayscale frames.
+    """
+    import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
+    import open3d.core as o3c  # heavy (1.2 s to import): only where meshes are made or ray-cast
+
+    if not views:
+        raise VrechoError("fuse: no frames")
+    device = o3c.Device("CPU:0")
+    grid = o3d.t.geometry.VoxelBlockGrid(attr_names=("tsdf", "weight", "color"),
+                                         attr_dtypes=(o3c.float32, o3c.float32, o3c.float32),
+                                         attr_channels=((1), (1), (3)), voxel_size=voxel_m,
+                                         block_resolution=16, block_count=50_000, device=device)
+
+    used = 0
+    for view in tqdm(views, desc="fuse (TSDF)", unit="frame", disable=not progress):
+        if not np.any((view.depth > 0) & (view.depth <= DEPTH_MAX_M)):
+            continue  # nothing in range (clear glass up close, the sky): open3d would abort
+        intrinsic = o3c.Tensor(view.intrinsics, o3c.float64)
+        extrinsic = o3c.Tensor(np.linalg.inv(view.pose), o3c.float64)  # world-to-camera
+        depth = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(view.depth, np.float32)))
+        color = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(np.repeat(view.gray[..., None], 3, axis=2),
+                                                                     np.float32)))
+        try:
+            blocks = grid.compute_unique_block_coordinates(depth, intrinsic, extrinsic, 1.0, DEPTH_MAX_M,
+                                                           trunc_voxels)
+        except RuntimeError as e:  # a few stray readings that touch no voxel block
+            if "No block is touched" in str(e):
+                continue
+            raise
+        used += 1
+        grid.integrate(blocks, depth, color, intrinsic, intrinsic, extrinsic, 1.0, DEPTH_MAX_M, trunc_voxels)
+    if not used:
+        raise VrechoError("fuse: no frame has a depth reading in range")
+    return grid.extract_triangle_mesh(weight_threshold=weight_threshold).to_legacy()
+
+
+def load_scan(folder: str | Path, voxel_m: float = 0.03, progress: bool = False) -> Scan:
+    """A user's capture, from a folder:
+
+    ``frames.npz`` (required)
+        ``depth`` (N, H, W) float, metres along the camera's axis, 0 where the sensor returned
+        nothing; ``gray`` (N, H, W) in [0, 1] (float) or 0..255 (uint8); ``pose`` (N, 4, 4)
+        camera-to-world, OpenCV axes (x right, y down, z forward), world z up, metres;
+        ``intrinsics`` (3, 3) pinhole matrix in pixels.
+    ``mesh.ply`` (optional)
+        The user's own mesh, in the same world frame; fused from the frames when absent.
+    ``echoes.npz`` (optional)
+        ``frame`` (K,) frame indices, ``audio`` (K, n) 1 s recordings from the probe's onset
+        (microphone 7 cm above the loudspeaker, both at the camera), ``fs`` (Hz), ``emitted``
+        (the probe, 1-D at ``fs``). Without it only oracle labels can repair the scan.
+    """
+    folder = Path(folder)
+    path = folder / "frames.npz"
+    if not path.is_file():
+        raise VrechoError(f"scan: {folder} has no frames.npz (see vrecho.reconstruct.load_scan for the format)")
+    with np.load(path) as f:
+        missing = {"depth", "gray", "pose", "intrinsics"} - set(f.files)
+        if missing:
+            raise VrechoError(f"scan: {path} lacks {sorted(missing)}")
+        depth, gray, pose, K = (np.asarray(f[k]) for k in ("depth", "gray", "pose", "intrinsics"))
+    if depth.ndim != 3 or gray.shape != depth.shape or pose.shape != (len(depth), 4, 4) or K.shape != (3, 3):
+        raise VrechoError(f"scan: {path}: expected depth and gray (N, H, W), pose (N, 4, 4), intrinsics (3, 3); got "
+                          f"{depth.shape}, {gray.shape}, {pose.shape}, {K.shape}")
+    if not (np.all(np.isfinite(depth)) and np.all(np.isfinite(pose)) and depth.min() >= 0):
+        raise VrechoError(f"scan: {path}: depth must be finite and non-negative, poses finite")
+    gray = gray.astype(np.float32) / 255 if gray.dtype == np.uint8 else gray.astype(np.float32)
+    views = [View(g, d.astype(np.float32), K.astype(float), p.astype(float)) for g, d, p in zip(gray, depth, pose)]
+    mesh_path = folder / "mesh.ply"
+    if mesh_path.is_file():
+        mesh = read_mesh(mesh_path)
+    else:
+        mesh = fuse(views, voxel_m, progress=progress)
+    echoes = None
+    if (folder / "echoes.npz").is_file():
+        with np.load(folder / "echoes.npz") as f:
+            try:
+                echoes = Echoes(f["frame"], f["audio"], int(f["fs"]), np.asarray(f["emitted"], float))
+            except KeyError as e:
+                raise VrechoError(f"scan: {folder / 'echoes.npz'} lacks {e}") from None
+        if echoes.frame.min(initial=0) < 0 or echoes.frame.max(initial=0) >= len(views):
+            raise VrechoError(f"scan: echoes.npz names frames outside 0..{len(views) - 1}")
+    return Scan(views, mesh, echoes)
