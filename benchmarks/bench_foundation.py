@@ -75,7 +75,7 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
-        out = generate(Path(tmp) / "ds", "tiny", args.seed, workers=None, cache=Path(tmp) / "cache", progress=False)
+        out = generate(Path(tmp) / "ds", preset="tiny", seed=args.seed, workers=None, cache=Path(tmp) / "cache", progress=False)
         t_tiny = time.perf_counter() - t
         ds = open_dataset(out)
         disk = sum(f.stat().st_size for f in (out / "frames.zarr").rglob("*") if f.is_file() and "/ir/" not in str(f))

@@ -62,7 +62,7 @@ def simulate_room(seed: int, n_src: int, rt60: float):
     from vrecho.sim.ambient import random_walk, simulate_walk_capture
 
     rng = np.random.default_rng(seed)
-    room, sources, poses = random_walk(rng, n_src, rt60, N_POSES, SEGMENT_S)
+    room, sources, poses = random_walk(rng, n_src, rt60, n_poses=N_POSES, segment_s=SEGMENT_S)
     return room, simulate_walk_capture(room, sources, poses, rng, segment_s=SEGMENT_S)
 
 
@@ -99,7 +99,7 @@ def one_room(args):
         errs = []
         for k in picks:
             c = sim.captures[k]
-            errs += list(_angles(true_dirs(c), doa(c, n_src, method, n_grid=2000 if method in SLOW_PRA else 4000,
+            errs += list(_angles(true_dirs(c), doa(c, n_src, method=method, n_grid=2000 if method in SLOW_PRA else 4000,
                                                    n_freq=12 if method in SLOW_PRA else None)))
         row["doa"][method] = errs
         row["time_s"][method] = (time.perf_counter() - t) / len(picks)
@@ -140,7 +140,7 @@ def _separation(sim, true: np.ndarray, located: np.ndarray, k: int):
     for method in METHODS + ("informed_true",):
         t = time.perf_counter()
         try:
-            est = separate(cap, n_src, "informed" if method == "informed_true" else method,
+            est = separate(cap, n_src, method="informed" if method == "informed_true" else method,
                            positions=true if method == "informed_true" else located)
         except VrechoError:  # a method that fails on a room counts as no improvement there
             est = np.repeat(cap.audio[:1], n_src, axis=0)

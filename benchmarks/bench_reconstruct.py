@@ -47,7 +47,7 @@ def _room(job) -> list[dict]:
     seed, k, frames, variant = job
     scene = random_scene(np.random.default_rng([seed, k]), f"bench_{k:03d}", n_poses=1, n_discontinuities=(2, 3))
     t = time.perf_counter()
-    scan = scan_scene(scene, frames)
+    scan = scan_scene(scene, n_frames=frames)
     t_scan = time.perf_counter() - t
     world = World(scene)
     meshes, seconds = {"none": scan.mesh}, {}
@@ -63,7 +63,7 @@ def _room(job) -> list[dict]:
         seconds[name] = r.seconds["total_without_hearing"]
     rows = []
     for name, mesh in meshes.items():
-        m = score(scene, scan.mesh, mesh, world)
+        m = score(scene, scan.mesh, mesh, world=world)
         m.update(scene=k, method=name, seconds=seconds.get(name, 0.0), scan_seconds=t_scan,
                  kinds=[d.kind for d in scene.discontinuities])
         rows.append(m)

@@ -40,7 +40,7 @@ def main():
     sdr0, _ = separation_metrics(ref, np.repeat(cap.audio[:1], 2, axis=0), perm=False)
     outs = {}
     for name, method in (("vrecho informed", "informed"), ("AuxIVA", "auxiva")):
-        y = separate(cap, 2, method, positions=found.positions)
+        y = separate(cap, 2, method=method, positions=found.positions)
         err = np.array([[np.sum((r - e) ** 2) for e in y] for r in ref])  # the output that matches each reference
         y = y[[0, 1] if err[0, 0] + err[1, 1] <= err[0, 1] + err[1, 0] else [1, 0]]
         outs[name] = (y, separation_metrics(ref, y, perm=False)[0] - sdr0)

@@ -24,7 +24,7 @@ def chromium() -> str | None:
     return next((p for p in map(shutil.which, CHROMIUM_NAMES) if p), None)
 
 
-def screenshot(page: str | Path, png: str | Path, size: tuple[int, int] = (1280, 800), budget_ms: int = 8000,
+def screenshot(page: str | Path, png: str | Path, *, size: tuple[int, int] = (1280, 800), budget_ms: int = 8000,
                timeout_s: float = 120.0) -> Path:
     """Open ``page`` (an HTML file) in headless Chromium and save what it shows to ``png``.
 

@@ -176,7 +176,7 @@ def _walk_rows(scene: Scene, walks: list[BoundaryWalk]) -> list:
     return rows
 
 
-def boundary_walks(scene: Scene, rng: np.random.Generator, progress: bool = False) -> list[BoundaryWalk]:
+def boundary_walks(scene: Scene, rng: np.random.Generator, *, progress: bool = False) -> list[BoundaryWalk]:
     """The headset call on a walk toward each discontinuity of ``scene`` (1.6 m high, straight
     at its centre, at 1 m/s, from up to 2.5 m away), in 10 ms blocks at 48 kHz, the headset's
     camera showing it a frame every 0.24 s (:func:`vrecho.sim.walks.headset_frames`)."""
@@ -268,7 +268,7 @@ def _walkthrough(scene: Scene, result, room: tuple, surfaces: list, placed: list
                        f"vrecho: {scene.name}", scene.room.box)
 
 
-def run(out: str | Path = "vrecho-out", scene: str | Path | Scene | None = None, html: str | Path | None = None,
+def run(out: str | Path = "vrecho-out", *, scene: str | Path | Scene | None = None, html: str | Path | None = None,
         browser: bool = True, screenshot: bool = True, seed: int = 0, serve: bool = False,
         progress: bool = True) -> DemoRun:
     """Run the demo on ``scene`` (the built-in living room when None; a scene JSON path, or a
@@ -332,7 +332,7 @@ def run(out: str | Path = "vrecho-out", scene: str | Path | Scene | None = None,
         done("sources", f"{len(placed)} placed from {len(sim.captures)} captures")
 
     step("headset")
-    walks = boundary_walks(scene, rng, progress)
+    walks = boundary_walks(scene, rng, progress=progress)
     rows += _walk_rows(scene, walks)
     if walks:
         files["boundary.png"] = boundary_figure(walks, out / "boundary.png")

@@ -162,7 +162,7 @@ def _surface(vis, s) -> None:
     vis[f"{ROOT}/surfaces/{s.name}_label"].set_transform(_transform(centre, (1.6, 0.2, 1.0)))
 
 
-def build(vis, w: Walkthrough, frames_per_pose: int = 6) -> None:
+def build(vis, w: Walkthrough, *, frames_per_pose: int = 6) -> None:
     """Draw ``w`` into the meshcat visualizer ``vis`` (its scene is replaced)."""
     import meshcat.animation as anim  # heavy (0.6 s to import): only the walkthrough page needs it
 
@@ -242,7 +242,7 @@ def _server():
         vis.window.server_proc.wait()
 
 
-def serve(w: Walkthrough, wait=None) -> None:
+def serve(w: Walkthrough, *, wait=None) -> None:
     """Show ``w`` on a live meshcat server (its address printed) until interrupted (Ctrl-C) or,
     with ``wait``, until ``wait()`` returns."""
     with _server() as vis:

@@ -29,7 +29,7 @@ __all__ = ["Capture", "Located", "PlacedSource", "doa", "locate", "place_sources
 CROSSFADE_S = 0.05
 
 
-def place_sources(captures, n_sources: int | None = None, bounds=None, method: str = "informed",
+def place_sources(captures, n_sources: int | None = None, *, bounds=None, method: str = "informed",
                   progress: bool = False) -> list[PlacedSource]:
     """The sources heard across ``captures``: where each is and what it plays.
 
@@ -44,13 +44,13 @@ def place_sources(captures, n_sources: int | None = None, bounds=None, method: s
     multichannel = [name for name, sep in SEPARATORS.items() if sep.multichannel]
     if method not in multichannel:  # before the work
         raise VrechoError(f"method: place_sources separates with {', '.join(multichannel)}, got {method!r}")
-    located = locate(captures, n_sources, bounds)
+    located = locate(captures, n_sources, bounds=bounds)
     k = len(located.positions)  # separate refuses more sources than a capture has microphones
     fs = captures[0].fs
     fade = int(CROSSFADE_S * fs)
     tracks = [np.zeros(0) for _ in range(k)]
     for c in tqdm(captures, desc="separating", unit="capture", disable=not progress):
-        y = separate(c, k, method, positions=located.positions)
+        y = separate(c, k, method=method, positions=located.positions)
         if method != "informed":  # blind outputs come in any order: match them to the positions
             y = y[_order_by_direction(c, y, located.positions)]
         for i in range(k):

@@ -87,7 +87,7 @@ class Capture:
         return self.mics.mean(axis=0)
 
     @classmethod
-    def at_pose(cls, audio, fs: int, pose: DevicePose, array: MicArray | str = "headset4", start_s: float = 0.0):
+    def at_pose(cls, audio, fs: int, pose: DevicePose, array: MicArray | str = "headset4", *, start_s: float = 0.0):
         """A capture from a known device pose and array (by name or :class:`MicArray`)."""
         if isinstance(array, str):
             if array not in MIC_ARRAYS:

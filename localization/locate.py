@@ -71,7 +71,7 @@ def check_captures(captures) -> list[Capture]:
     return captures
 
 
-def stft(audio: np.ndarray, nfft: int = NFFT) -> np.ndarray:
+def stft(audio: np.ndarray, *, nfft: int = NFFT) -> np.ndarray:
     """(M, F, T) short-time spectra, Hann window, hop nfft / 2."""
     hop = nfft // 2
     n = audio.shape[1]
@@ -91,7 +91,7 @@ def grid_points(lo: np.ndarray, hi: np.ndarray, step: float) -> np.ndarray:
     return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
 
 
-def search_box(captures: list[Capture], bounds=None) -> tuple[np.ndarray, np.ndarray]:
+def search_box(captures: list[Capture], *, bounds=None) -> tuple[np.ndarray, np.ndarray]:
     """Where sources are sought: ``bounds`` ((3,), (3,)) if given (the reconstructed room), else
     the captures' extent grown by 4 m across and 2 m up and down."""
     if bounds is not None:
@@ -222,7 +222,7 @@ class Votes:
         self._maps()
 
 
-def locate(captures, n_sources: int | None = None, bounds=None, step_m: float = 0.1,
+def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float = 0.1,
            max_sources: int = 4, min_strength: float = 0.25) -> Located:
     """World positions of the sources heard across ``captures`` (see the module's docstring).
 
@@ -233,7 +233,7 @@ def locate(captures, n_sources: int | None = None, bounds=None, step_m: float = 
     if n_sources is not None and (isinstance(n_sources, bool) or not isinstance(n_sources, (int, np.integer))
                                   or n_sources < 1):
         raise VrechoError(f"n_sources: expected a positive whole number or None, got {n_sources!r}")
-    lo, hi = search_box(captures, bounds)
+    lo, hi = search_box(captures, bounds=bounds)
     grid = grid_points(lo, hi, step_m)
     votes = Votes(captures)
     every_vote = votes.maps  # kept for each capture's own direction once the sources are found
@@ -263,7 +263,7 @@ def locate(captures, n_sources: int | None = None, bounds=None, step_m: float = 
     return Located(positions, unc, np.array(strength) / strength[0], d / np.linalg.norm(d, axis=-1, keepdims=True))
 
 
-def doa(capture: Capture, n_sources: int, method: str = "NormMUSIC", n_grid: int = 6000,
+def doa(capture: Capture, n_sources: int, *, method: str = "NormMUSIC", n_grid: int = 6000,
         n_freq: int | None = None) -> np.ndarray:
     """Directions (n_sources, 3) of the sources one capture hears, by a pyroomacoustics method
     on a sphere grid of ``n_grid`` points, as unit vectors from the array centre (world frame).

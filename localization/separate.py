@@ -111,7 +111,7 @@ def _fastmnmf(capture: Capture, X: np.ndarray, k: int, n_iter: int) -> np.ndarra
     return pra.bss.fastmnmf2(X, n_src=k, n_iter=n_iter, mic_index=0)
 
 
-def separate(capture: Capture, n_sources: int, method: str = "informed", *, positions=None,
+def separate(capture: Capture, n_sources: int, *, method: str = "informed", positions=None,
              n_iter: int | None = None) -> np.ndarray:
     """Separate ``n_sources`` sources from ``capture`` (see the module's docstring); ``n_iter``:
     the iterations of the blind methods and NMF (informed separation has none)."""

@@ -12,7 +12,7 @@ def tiny_dataset(tmp_path_factory):
     from vrecho.learn.datasets import generate
 
     root = tmp_path_factory.mktemp("tiny")
-    return generate(root / "ds", "tiny", seed=0, workers=2, cache=root / "cache", progress=False)
+    return generate(root / "ds", preset="tiny", seed=0, workers=2, cache=root / "cache", progress=False)
 
 
 def run_cli(*args, timeout=600):

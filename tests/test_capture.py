@@ -112,14 +112,14 @@ def test_a_video_round_trip_gives_the_simulated_frames_answers(ir, tmp_path, cod
     pose = scene.poses[0]
     x, truth = simulate_recording(ir, 5, np.random.default_rng(6), snr_db=30)
     x = 0.5 * x / np.abs(x).max()
-    view = render_view(scene, camera_pose(pose.camera, pose.forward), Camera(160, 120))
+    view = render_view(scene, camera_pose(pose.camera, pose.forward), camera=Camera(160, 120))
     gray = np.repeat((255 * view.gray).astype(np.uint8)[None], int(len(x) / 44100 * 10), axis=0)
     video = tmp_path / f"capture.{ext}"
-    write_video(video, gray, 10, x, 44100, codec)
+    write_video(video, gray, 10, x, 44100, audio_codec=codec)
     assert main(["capture", str(video), "--out", str(tmp_path / "out")]) == 0
     rows = list(csv.DictReader(open(tmp_path / "out" / "frames.csv")))
     direct = find_onsets(x, 44100)
-    expected = load_classifier().predict_batch(cut_frames(x, direct), 44100, None, probe())
+    expected = load_classifier().predict_batch(cut_frames(x, direct), 44100, images=None, emitted=probe())
     assert len(rows) == len(expected) >= 3  # the same frames found
     for r, t, p in zip(rows, direct.seconds, expected):
         assert abs(float(r["time_s"]) - t) < 1 / 44100

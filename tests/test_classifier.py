@@ -140,7 +140,7 @@ def test_a_tiny_model_beats_chance(tiny_dataset, tmp_path):
     training rooms' median depth."""
     from vrecho.learn.evaluate import Harness, evaluate, train_methods
 
-    train_methods(tiny_dataset, tmp_path / "run", ["EchoCNN-E"], epochs=3, progress=False)
+    train_methods(tiny_dataset, tmp_path / "run", methods=["EchoCNN-E"], epochs=3, progress=False)
     res = evaluate(tiny_dataset, tmp_path / "run", tmp_path / "eval", progress=False, methods=["EchoCNN-E"])
     h = Harness(tiny_dataset, progress=False)
     tr, te = h.frames("product", "train").y, h.frames("product", "test").y

@@ -80,7 +80,7 @@ def test_interrupted_generate_resumes_and_the_seed_fixes_every_array(tiny_datase
     with pytest.raises(VrechoError, match="unfinished"):
         open_dataset(out)
     stamps = {p.name: p.stat().st_mtime_ns for p in (out / "progress").glob("*.csv")}
-    generate(out, "tiny", 0, workers=2, cache=tmp_path / "cache", progress=False)
+    generate(out, preset="tiny", seed=0, workers=2, cache=tmp_path / "cache", progress=False)
     for name, stamp in stamps.items():  # finished rooms were not redone
         assert (out / "progress" / name).stat().st_mtime_ns == stamp
     a, b = open_dataset(tiny_dataset), open_dataset(out)
@@ -91,13 +91,13 @@ def test_interrupted_generate_resumes_and_the_seed_fixes_every_array(tiny_datase
 
 def test_other_dataset_in_the_folder_is_refused(tiny_dataset):
     with pytest.raises(VrechoError, match="holds another dataset"):
-        generate(tiny_dataset, "tiny", seed=1)
+        generate(tiny_dataset, preset="tiny", seed=1)
 
 
 def test_foreign_folder_is_refused(tmp_path):
     (tmp_path / "notes.txt").write_text("mine")
     with pytest.raises(VrechoError, match="not empty"):
-        generate(tmp_path, "tiny")
+        generate(tmp_path, preset="tiny")
     assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]  # nothing written
 
 

@@ -23,7 +23,7 @@ def _view(world, wall: int, u_m: float, distance_m: float, yaw_deg: float = 0.0)
     emitter = origin + u_m * u + [0.0, 0.0, 1.55] - distance_m * normal
     yaw = np.radians(yaw_deg)
     forward = np.cos(yaw) * normal + np.sin(yaw) * u
-    return render_view(world, camera_pose(emitter + [0.0, 0.0, 0.07], forward), HEADSET_CAMERA)
+    return render_view(world, camera_pose(emitter + [0.0, 0.0, 0.07], forward), camera=HEADSET_CAMERA)
 
 
 @pytest.mark.parametrize("wall, u_m, distance_m, yaw, expected", [
@@ -69,8 +69,8 @@ def test_training_on_a_few_rooms_round_trips(tmp_path):
     save(model, tmp_path / "view.pt")
     again = load_model(tmp_path / "view.pt")
     view = _view(World(small_room()), 1, 1.8, 1.2)
-    a = look(view.gray, view.depth, view.intrinsics, 1.2, model)
-    b = look(view.gray, view.depth, view.intrinsics, 1.2, again)
+    a = look(view.gray, view.depth, view.intrinsics, 1.2, model=model)
+    b = look(view.gray, view.depth, view.intrinsics, 1.2, model=again)
     assert a.surface == b.surface and abs(a.confidence - b.confidence) < 1e-2  # half precision on disk
     (tmp_path / "bad.pt").write_bytes(b"not a model")
     with pytest.raises(VrechoError, match="not a headset-view model"):

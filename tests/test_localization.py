@@ -55,7 +55,7 @@ def test_both_sources_placed_and_separated(two_sources, tmp_path):
         assert 0 < p.confidence <= 1 and p.uncertainty_m is not None and p.uncertainty_m < 1.0
     # separation improves the signal-to-interference ratio on a capture
     k = 4
-    y = separate(sim.captures[k], 2, "informed", positions=est)
+    y = separate(sim.captures[k], 2, method="informed", positions=est)
     assert _sir_gain(sim.images[k, :, 0], y, sim.captures[k].audio[0]) > 12.0  # 17.7 dB with the shipped network
     # and the placed sources feed usd_export
     from pxr import Usd, UsdGeom
@@ -77,7 +77,7 @@ def test_informed_at_another_rate(two_sources):
     _, sim = two_sources
     cap = sim.captures[4]
     hi = Capture(resample_poly(cap.audio, 3, 1, axis=1), 48000, cap.mics)
-    y = separate(hi, 2, "informed", positions=np.array([s.position for s in sim.sources]))
+    y = separate(hi, 2, method="informed", positions=np.array([s.position for s in sim.sources]))
     assert y.shape == (2, hi.audio.shape[1]) and np.all(np.isfinite(y))
     assert _sir_gain(resample_poly(sim.images[4, :, 0], 3, 1, axis=1), y, hi.audio[0]) > 12.0  # 18.7 dB
 
@@ -115,7 +115,7 @@ def test_blind_methods_separate(two_sources, method):
 
     _, sim = two_sources
     cap = sim.captures[4]
-    y = separate(cap, 2, method)
+    y = separate(cap, 2, method=method)
     assert y.shape == (2, cap.audio.shape[1]) and np.all(np.isfinite(y))
     if method == "nmf":  # Wiener masks share out microphone 0 exactly (but the STFT's edges)
         n = cap.audio.shape[1]
@@ -128,7 +128,7 @@ def test_doa_one_capture(two_sources):
     from localization import doa
 
     _, sim = two_sources
-    d = doa(sim.captures[0], 2, "SRP", n_grid=500)
+    d = doa(sim.captures[0], 2, method="SRP", n_grid=500)
     assert d.shape == (2, 3) and np.allclose(np.linalg.norm(d, axis=1), 1)
 
 
@@ -153,19 +153,19 @@ def test_bad_input():
         Capture(bad, 16000, mics)
     c = Capture(x, 16000, mics)
     with pytest.raises(VrechoError, match="at most as many sources as microphones"):
-        separate(c, 5, "auxiva")
+        separate(c, 5, method="auxiva")
     with pytest.raises(VrechoError, match="needs the sources' positions"):
-        separate(c, 2, "informed")
+        separate(c, 2, method="informed")
     with pytest.raises(VrechoError, match="fewer sources than microphones"):
-        doa(c, 4, "MUSIC")
+        doa(c, 4, method="MUSIC")
     with pytest.raises(VrechoError, match="method"):
-        separate(c, 2, "magic")
+        separate(c, 2, method="magic")
     one = Capture(x[:1], 16000, mics[:1])
     with pytest.raises(VrechoError, match="at least 2"):
         locate([one])
     with pytest.raises(VrechoError, match="at most as many sources"):
-        separate(one, 2, "fastmnmf")
-    assert separate(one, 2, "nmf").shape == (2, 8000)  # the single-channel fallback
+        separate(one, 2, method="fastmnmf")
+    assert separate(one, 2, method="nmf").shape == (2, 8000)  # the single-channel fallback
     with pytest.raises(VrechoError, match="none given"):
         place_sources([])
     with pytest.raises(VrechoError, match="different sample rates"):

@@ -14,7 +14,7 @@ def _batch(n=4):
                                             (("image",), "concat"), (("echo", "image"), "mfb"),
                                             (("wave",), "concat")])
 def test_every_variant_has_every_head(inputs, fusion):
-    model = EchoCNN(inputs, fusion).eval()
+    model = EchoCNN(inputs, fusion=fusion).eval()
     out = model(_batch())
     assert set(HEADS) <= set(out)
     assert out["open"].shape == (4, 2) and out["material"].shape == (4, 2)

@@ -16,7 +16,7 @@ from conftest import small_room
 @pytest.fixture(scope="module")
 def scan():
     scene = vrecho.builtin_scene()
-    views = walkthrough(scene, 30, Camera(160, 120))
+    views = walkthrough(scene, n_frames=30, camera=Camera(160, 120))
     mesh = fuse(views, voxel_m=0.04)
     return scene, np.asarray(mesh.vertices), views
 
@@ -120,7 +120,7 @@ def small():
     from vrecho.sim.scans import hear_echoes, scan_scene
 
     scene = small_room()
-    scan = scan_scene(scene, 36, Camera(200, 150), voxel_m=0.04)
+    scan = scan_scene(scene, n_frames=36, camera=Camera(200, 150), voxel_m=0.04)
     result = reconstruct(scan, hear=hear_echoes(scene), decide="echocnn")
     assert scan.echoes is None and result.scan.echoes is not None  # the scan given is not changed
     return scene, scan, result
@@ -172,7 +172,7 @@ def test_metrics_rank_the_repair_above_no_repair_and_per_vertex_works(small):
     assert none["closed_iou"] == 0 and ours["closed_iou"] > 0.85
     assert ours["openings_filled"] == 0 and ours["chamfer_cm"] < none["chamfer_cm"]
     assert max(ours["depth_error_cm"]) < 3
-    repaired, surfaces, actions = repair(scan.mesh, result.holes, oracle(scene, result.holes), scan.cameras, "per_vertex")
+    repaired, surfaces, actions = repair(scan.mesh, result.holes, oracle(scene, result.holes), scan.cameras, variant="per_vertex")
     pv = score(scene, scan.mesh, repaired)
     assert pv["closed_iou"] > 0.8 and all(a["fill"] == "per_vertex" for a in actions if a["filled"])
 

@@ -17,7 +17,7 @@ def world():
 
 def _centre_depth(world, index, depth):
     pose = face(world.scene, index, depth)
-    view = render_view(world, camera_pose(pose.camera, pose.forward), CAM)
+    view = render_view(world, camera_pose(pose.camera, pose.forward), camera=CAM)
     return view, view.depth[20:28, 28:36]
 
 
@@ -43,7 +43,7 @@ def test_glass_that_the_sensor_sees_through_or_not(world):
 def test_wall_depth_is_the_z_depth(world):
     scene = world.scene
     pose = face(scene, 0, 1.0, offset_u_m=1.6)  # beside the window: plain wall ahead
-    view = render_view(world, camera_pose(pose.camera, pose.forward), CAM)
+    view = render_view(world, camera_pose(pose.camera, pose.forward), camera=CAM)
     assert np.allclose(view.depth[22:26, 30:34], 1.0, atol=0.01)
 
 
@@ -69,7 +69,7 @@ def test_a_crop_from_a_camera_frame_matches_the_ray_traced_crop():
     scene = builtin_scene()
     world = World(scene)
     pose = next(p for p in scene.poses if scene.depth_m(p) > 2.5)  # far enough for the frame to hold the region
-    view = render_view(world, camera_pose(pose.camera, pose.forward), Camera())
+    view = render_view(world, camera_pose(pose.camera, pose.forward), camera=Camera())
     image, inside = crop_view(view, scene.discontinuity_corners(pose.target))
     assert inside == 1.0
     assert np.abs(image.astype(int) - crop(world, pose)).mean() < 3  # of 255

@@ -50,7 +50,7 @@ def from_reconstruction(result) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarra
     return room, surfaces
 
 
-def sources_from_scene(scene, seconds: int = 10) -> list:
+def sources_from_scene(scene, *, seconds: int = 10) -> list:
     """The scene's own sound sources at their true positions, each playing its sound (PROTOCOL's
     100 ms sound once a second, at the source's gain): the truth, standing in where no
     localization ran (``vrecho export --sources truth``)."""

@@ -303,7 +303,7 @@ def check_target(path: str | Path) -> Path:
     return path
 
 
-def write_scene(path: str | Path, mesh, surfaces=(), sources=(), check: bool = True) -> Path:
+def write_scene(path: str | Path, mesh, surfaces=(), sources=(), *, check: bool = True) -> Path:
     """Write a repaired room as an OpenUSD stage (``.usda``, ``.usdc``, ``.usd``) or a ``.usdz``
     package.
 

@@ -83,7 +83,7 @@ def crop_grid(c: np.ndarray, shape: tuple[int, int], margin: float) -> np.ndarra
     return (c[1] + a * (c[0] - c[1]) + b * (c[3] - c[0])).reshape(-1, 3)
 
 
-def crop_view(view: View, corners: np.ndarray, shape: tuple[int, int] = CROP_SHAPE,
+def crop_view(view: View, corners: np.ndarray, *, shape: tuple[int, int] = CROP_SHAPE,
               margin: float = 0.15) -> tuple[np.ndarray, float]:
     """The same crop as :func:`crop`, resampled (bilinearly) from a camera frame: what a real
     capture gives. ``corners`` (4, 3): a wall rectangle wound like the scene's walls, (u0, z0),
@@ -121,7 +121,7 @@ def mesh_depth(mesh, poses: np.ndarray, intrinsics: np.ndarray, width: int, heig
     return out
 
 
-def device_pose(view: View, target: int | None = None) -> DevicePose:
+def device_pose(view: View, *, target: int | None = None) -> DevicePose:
     """The capture device of a frame: the camera is its microphone, 7 cm above the emitter."""
     up = -view.pose[:3, 1]  # OpenCV's y axis points down
     return DevicePose(view.pose[:3, 3] - MIC_ABOVE_EMITTER_M * up, view.pose[:3, 2], up, target)

@@ -67,13 +67,13 @@ class Prediction:
 class Classifier:
     """EchoCNN variants behind one ``predict``; see the module's docstring."""
 
-    def __init__(self, models: dict[str, torch.nn.Module], names: dict[str, str] | None = None):
+    def __init__(self, models: dict[str, torch.nn.Module], *, names: dict[str, str] | None = None):
         self.models = models
         self.names = {**_NAMES, **(names or {})}
         for m in models.values():
             m.eval()
 
-    def predict(self, audio, fs: int, image=None, emitted=None) -> Prediction:
+    def predict(self, audio, fs: int, *, image=None, emitted=None) -> Prediction:
         """One 1 s frame (1-D, starting at the pulse onset) at ``fs`` Hz; optionally the 64 x 25
         camera crop (uint8, or float in [0, 1]) and the emitted sound (1-D, at ``fs``)."""
         x = np.asarray(audio)
@@ -85,9 +85,9 @@ class Classifier:
             emitted = np.asarray(emitted)
             if emitted.ndim != 1:
                 raise VrechoError(f"emitted: expected a 1-D sound, got shape {emitted.shape}")
-        return self.predict_batch(x[None], fs, image, emitted)[0]
+        return self.predict_batch(x[None], fs, images=image, emitted=emitted)[0]
 
-    def predict_batch(self, audio, fs: int, images=None, emitted=None) -> list[Prediction]:
+    def predict_batch(self, audio, fs: int, *, images=None, emitted=None) -> list[Prediction]:
         """Many frames at once: ``audio`` (B, n); ``images`` (B, 64, 25) or None; ``emitted`` one
         sound for all (k,) or one per frame (B, k), or None."""
         x = check_frames(audio, fs)
@@ -185,4 +185,4 @@ def _load(path: Path) -> Classifier:
         models[key] = model
     if set(models) != set(_NAMES):
         raise VrechoError(f"classifier: {path} lacks models {sorted(set(_NAMES) - set(models))}")
-    return Classifier(models, names)
+    return Classifier(models, names=names)

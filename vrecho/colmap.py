@@ -145,7 +145,7 @@ def pinhole(K: np.ndarray, width: int, height: int) -> Camera:
     return Camera("PINHOLE", width, height, np.array([K[0, 0], K[1, 1], K[0, 2] + 0.5, K[1, 2] + 0.5]))
 
 
-def image_times(names: list[str], fps: float, first: int = 1) -> np.ndarray:
+def image_times(names: list[str], fps: float, *, first: int = 1) -> np.ndarray:
     """Each picture's time in the video (s), from the last number in its file name: pictures
     extracted at ``fps`` per second and numbered from ``first`` (``ffmpeg -i capture.mp4 -vf
     fps=2 images/%06d.png`` numbers from 1 at 2 per second: picture k shows time (k - 1) / 2)."""

@@ -117,7 +117,7 @@ def logmel(audio, fs: int = FS) -> np.ndarray:
     return ((pooled - mean) / np.maximum(std, 1e-6)).astype(np.float32)
 
 
-def echo_response(audio, emitted, fs: int = FS, length_s: float | None = ECHO_WINDOW_S,
+def echo_response(audio, emitted, fs: int = FS, *, length_s: float | None = ECHO_WINDOW_S,
                   regularization: float = 1e-3) -> np.ndarray:
     """The room's impulse response estimated from a frame and the known emitted sound.
 
@@ -202,7 +202,7 @@ def echo_features(audio, emitted, fs: int = FS) -> EchoFeatures:
     return EchoFeatures(envelope.astype(np.float32), np.maximum(db, -120).astype(np.float32))
 
 
-def echo_at(audio, emitted, depth_m: float, fs: int = FS, window_m: float = 0.03) -> tuple[float, float]:
+def echo_at(audio, emitted, depth_m: float, fs: int = FS, *, window_m: float = 0.03) -> tuple[float, float]:
     """The echo of a plane expected ``depth_m`` in front of the emitter (say, a wall seen by the
     camera): its level and its measured depth.
 
@@ -218,7 +218,7 @@ def echo_at(audio, emitted, depth_m: float, fs: int = FS, window_m: float = 0.03
     depth_m : float
     """
     c = SPEED_OF_SOUND
-    h = np.abs(echo_response(audio, emitted, fs, 0.03)).astype(np.float64)
+    h = np.abs(echo_response(audio, emitted, fs, length_s=0.03)).astype(np.float64)
     direct = int(np.argmax(h[:int(0.002 * FS)]))
 
     def index(d):

@@ -41,7 +41,7 @@ IGNORE = -100
 class AudioBranch(nn.Module):
     """The paper's audio sub-network: conv 3 x 3, batch normalisation, ReLU, 2 x 2 max-pool, dense."""
 
-    def __init__(self, n_filters: int = 16, hidden: int = 128):
+    def __init__(self, *, n_filters: int = 16, hidden: int = 128):
         super().__init__()
         self.conv = nn.Conv2d(1, n_filters, 3, padding=1)
         self.norm = nn.BatchNorm2d(n_filters)
@@ -56,7 +56,7 @@ class AudioBranch(nn.Module):
 class ImageBranch(nn.Module):
     """Two conv blocks over the 64 x 25 grayscale crop, then dense."""
 
-    def __init__(self, hidden: int = 128):
+    def __init__(self, *, hidden: int = 128):
         super().__init__()
         self.conv1 = nn.Conv2d(1, 16, 3, padding=1)
         self.norm1 = nn.BatchNorm2d(16)
@@ -86,7 +86,7 @@ class EchoBranch(nn.Module):
 
     REFINE_STEPS = 3
 
-    def __init__(self, hidden: int = 128, length: int = 1323, channels: int = 24,
+    def __init__(self, *, hidden: int = 128, length: int = 1323, channels: int = 24,
                  dilations: tuple[int, ...] = (1, 2, 4, 8, 16, 32)):
         super().__init__()
         self.stem = nn.Conv1d(1, channels, 8, stride=2, padding=3)
@@ -135,7 +135,7 @@ class SoundNetBranch(nn.Module):
     pretrained weights cannot be had offline). A quarter of the sample rate keeps training within
     minutes per epoch on two cores; the global pooling discards echo timing anyway."""
 
-    def __init__(self, n_layers: int = 8, hidden: int = 128):
+    def __init__(self, *, n_layers: int = 8, hidden: int = 128):
         super().__init__()
         if n_layers not in (5, 8):
             raise ValueError(f"n_layers: expected 5 or 8, got {n_layers!r}")
@@ -160,7 +160,7 @@ class MFB(nn.Module):
     """Multi-modal factorised bilinear pooling: z_i = 1^T (U_i^T x o V_i^T y), with k factors
     per output, then power and L2 normalisation."""
 
-    def __init__(self, x_features: int, y_features: int, out_features: int = 128, k: int = 5, dropout: float = 0.1):
+    def __init__(self, x_features: int, y_features: int, *, out_features: int = 128, k: int = 5, dropout: float = 0.1):
         super().__init__()
         self.u = nn.Linear(x_features, out_features * k)
         self.v = nn.Linear(y_features, out_features * k)
@@ -194,7 +194,7 @@ class EchoCNN(nn.Module):
         Depth of the SoundNet branch.
     """
 
-    def __init__(self, inputs: tuple[str, ...] = ("mel",), fusion: str = "concat", hidden: int = 128,
+    def __init__(self, inputs: tuple[str, ...] = ("mel",), *, fusion: str = "concat", hidden: int = 128,
                  dropout: float = 0.3, wave_layers: int = 8):
         super().__init__()
         if not inputs or not set(inputs) <= set(INPUTS):
@@ -210,12 +210,12 @@ class EchoCNN(nn.Module):
         if "echo" in inputs:
             self.branches["echo"] = EchoBranch(hidden=hidden)
         if "wave" in inputs:
-            self.branches["wave"] = SoundNetBranch(wave_layers, hidden=hidden)
+            self.branches["wave"] = SoundNetBranch(n_layers=wave_layers, hidden=hidden)
         if "image" in inputs:
             self.branches["image"] = ImageBranch(hidden=hidden)
         sizes = [b.out_features for b in self.branches.values()]
         if fusion == "mfb" and len(sizes) == 2:
-            self.mfb = MFB(sizes[0], sizes[1], hidden)
+            self.mfb = MFB(sizes[0], sizes[1], out_features=hidden)
             fused = hidden
         else:
             fused = sum(sizes)
@@ -253,8 +253,8 @@ class EchoCNN(nn.Module):
 
 def build(config: dict) -> EchoCNN:
     """An EchoCNN from its ``config`` (as stored in checkpoints)."""
-    return EchoCNN(tuple(config["inputs"]), config["fusion"], config["hidden"], config["dropout"],
-                   config.get("wave_layers", 8))
+    return EchoCNN(tuple(config["inputs"]), fusion=config["fusion"], hidden=config["hidden"], dropout=config["dropout"],
+                   wave_layers=config.get("wave_layers", 8))
 
 
 class FeatureBaseline:
@@ -275,7 +275,7 @@ class FeatureBaseline:
         Inverse regularisation, for the SVM.
     """
 
-    def __init__(self, kind: str = "knn", inputs: tuple[str, ...] = ("mel",), n_neighbors: int = 5, C: float = 0.1):
+    def __init__(self, kind: str = "knn", inputs: tuple[str, ...] = ("mel",), *, n_neighbors: int = 5, C: float = 0.1):
         if kind not in ("knn", "svm"):
             raise ValueError(f"kind: expected knn or svm, got {kind!r}")
         self.kind, self.inputs, self.n_neighbors, self.C = kind, tuple(inputs), n_neighbors, C

@@ -50,7 +50,7 @@ def _field(d: dict, key: str, where: str, default=dataclasses.MISSING):
     return d[key]
 
 
-def check_number(x, where: str, lo: float | None = None, hi: float | None = None) -> float:
+def check_number(x, where: str, *, lo: float | None = None, hi: float | None = None) -> float:
     if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)) or not np.isfinite(x):
         raise VrechoError(f"{where}: expected a finite number, got {x!r}")
     if lo is not None and x < lo:
@@ -97,7 +97,7 @@ class Material:
         object.__setattr__(self, "absorption", a)
 
     @classmethod
-    def from_database(cls, name: str, scattering: float = 0.1) -> "Material":
+    def from_database(cls, name: str, *, scattering: float = 0.1) -> "Material":
         """A material of pyroomacoustics' database, its bands padded to the seven of the protocol."""
         import pyroomacoustics as pra  # heavy (1.4 s): its database only where a material is named
 
@@ -119,8 +119,8 @@ class Material:
         absorption = _field(d, "absorption", where)
         if not isinstance(absorption, (list, tuple)) or len(absorption) != len(BANDS_HZ):
             raise VrechoError(f"{where}.absorption: expected {len(BANDS_HZ)} values (bands {BANDS_HZ} Hz), got {absorption!r}")
-        vals = tuple(check_number(v, f"{where}.absorption[{i}]", 0.0, 1.0) for i, v in enumerate(absorption))
-        return cls(name, vals, check_number(_field(d, "scattering", where, 0.1), f"{where}.scattering", 0.0, 1.0))
+        vals = tuple(check_number(v, f"{where}.absorption[{i}]", lo=0.0, hi=1.0) for i, v in enumerate(absorption))
+        return cls(name, vals, check_number(_field(d, "scattering", where, 0.1), f"{where}.scattering", lo=0.0, hi=1.0))
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -238,7 +238,7 @@ class Room:
         u = (p1 - p0) / np.linalg.norm(p1 - p0)
         return np.array([p0[0], p0[1], 0.0]), np.array([u[0], u[1], 0.0]), np.array([u[1], -u[0], 0.0])
 
-    def contains(self, points: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
+    def contains(self, points: np.ndarray, *, margin_m: float = 0.0) -> np.ndarray:
         """Whether 3-D points (N, 3) lie inside the room, at least ``margin_m`` from every surface."""
         p = np.atleast_2d(points)
         inside = point_in_polygon(p[:, :2], self.footprint) & (p[:, 2] > margin_m) & (p[:, 2] < self.height_m - margin_m)
@@ -327,11 +327,11 @@ class Discontinuity:
         return cls(wall,
                    check_number(_field(d, "center_u_m", where), f"{where}.center_u_m"),
                    check_number(_field(d, "center_z_m", where), f"{where}.center_z_m"),
-                   check_number(_field(d, "width_m", where), f"{where}.width_m", 0.01),
-                   check_number(_field(d, "height_m", where), f"{where}.height_m", 0.01),
+                   check_number(_field(d, "width_m", where), f"{where}.width_m", lo=0.01),
+                   check_number(_field(d, "height_m", where), f"{where}.height_m", lo=0.01),
                    kind,
-                   tuple(check_number(a, f"{where}.absorption[{i}]", 0.0, 1.0) for i, a in enumerate(absorption)),
-                   check_number(_field(d, "scattering", where, 0.02), f"{where}.scattering", 0.0, 1.0),
+                   tuple(check_number(a, f"{where}.absorption[{i}]", lo=0.0, hi=1.0) for i, a in enumerate(absorption)),
+                   check_number(_field(d, "scattering", where, 0.02), f"{where}.scattering", lo=0.0, hi=1.0),
                    bool(_field(d, "depth_sensor_sees_through", where, True)))
 
 
@@ -427,7 +427,7 @@ class SoundSource:
         if sound not in SOUNDS:
             raise VrechoError(f"{where}.sound: expected one of {SOUNDS}, got {sound!r}")
         return cls(_vector(_field(d, "position", where), f"{where}.position"), sound,
-                   check_number(_field(d, "gain_db", where, 0.0), f"{where}.gain_db", -60, 40))
+                   check_number(_field(d, "gain_db", where, 0.0), f"{where}.gain_db", lo=-60, hi=40))
 
 
 @dataclass
@@ -494,7 +494,7 @@ class Scene:
     # -- checks ---------------------------------------------------------------------------------
     def validate(self) -> None:
         """Raise :class:`VrechoError` naming the first field that is impossible."""
-        check_number(self.emitter_p, "scene.emitter_p", 0.0, 1.0)
+        check_number(self.emitter_p, "scene.emitter_p", lo=0.0, hi=1.0)
         room = self.room
         lengths = room.wall_lengths
         spans: dict[int, list] = {}
@@ -612,7 +612,7 @@ class Scene:
                    [DevicePose.from_dict(x, f"poses[{i}]") for i, x in enumerate(items("poses"))],
                    [SoundSource.from_dict(x, f"sources[{i}]") for i, x in enumerate(items("sources"))],
                    None if cp is None else CameraPath.from_dict(cp), MIC_ARRAYS[mic],
-                   check_number(d.get("emitter_p", 0.7), "scene.emitter_p", 0.0, 1.0))
+                   check_number(d.get("emitter_p", 0.7), "scene.emitter_p", lo=0.0, hi=1.0))
 
 
 def load_scene(path: str | Path) -> Scene:

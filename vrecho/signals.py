@@ -156,7 +156,7 @@ def emitted_sound(name: str, fs: int = FS, rng: np.random.Generator | None = Non
     return _shape(x, fs)
 
 
-def probe(fs: int = FS, f_lo: float = 200.0, f_hi: float = 18_000.0) -> np.ndarray:
+def probe(fs: int = FS, *, f_lo: float = 200.0, f_hi: float = 18_000.0) -> np.ndarray:
     """vrecho's documented ranging probe: a 100 ms logarithmic sweep from 200 Hz to 18 kHz.
 
     Broadband, so echo delays can be read to a fraction of a sample by deconvolution, and

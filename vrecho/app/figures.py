@@ -14,7 +14,7 @@ from ..capture.onsets import Onsets
 from ..reconstruct import Reconstruction
 
 
-def render_mesh(mesh, pose: np.ndarray, camera: Camera = Camera()) -> np.ndarray:
+def render_mesh(mesh, pose: np.ndarray, *, camera: Camera = Camera()) -> np.ndarray:
     """An RGB picture (H, W, 3) in [0, 1] of an open3d triangle mesh from a camera-to-world
     ``pose``: vertex colours, lit from the camera (headless: ray casting, no OpenGL)."""
     import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
@@ -60,7 +60,7 @@ def before_after(result: Reconstruction, path: str | Path) -> Path:
             if row == 1:
                 mesh = below(mesh, hi[2] - 0.3)
             ax = axes[row, col]
-            ax.imshow(render_mesh(mesh, pose, Camera(480, 360, 80 if row == 0 else 60)))
+            ax.imshow(render_mesh(mesh, pose, camera=Camera(480, 360, 80 if row == 0 else 60)))
             ax.set_title(title if row == 0 else f"{title}, from above (ceiling cut away)")
             ax.axis("off")
     fig.tight_layout()

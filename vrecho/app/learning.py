@@ -12,7 +12,7 @@ from ..learn.datasets import open_dataset
 def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: int | None = None, cache=None,
              progress: bool = True) -> Path:
     """``vrecho generate``: :func:`vrecho.learn.datasets.generate` (resumable), then what was made."""
-    out = generate_dataset(out, preset, seed, workers, cache, progress=progress)
+    out = generate_dataset(out, preset=preset, seed=seed, workers=workers, cache=cache, progress=progress)
     ds = open_dataset(out)
     m = ds.manifest
     print(f"{out}: {len(ds)} frames ({int(ds.mask(kind='echo').sum())} echo, {int(ds.mask(kind='source').sum())} "
@@ -28,7 +28,7 @@ def train(data: str | Path, out: str | Path, *, methods=None, seed: int = 0, epo
     method's record; ``out/classifier.pt`` once the shipped methods are trained."""
     from ..learn.evaluate import train_methods  # torch-bound (1.7 s): only when training
 
-    records = train_methods(data, out, methods, seed, epochs, patience, progress=progress)
+    records = train_methods(data, out, methods=methods, seed=seed, epochs=epochs, patience=patience, progress=progress)
     for name, r in records.items():
         extra = f", {r['epochs']} epochs (best {r['best_epoch'] + 1})" if "epochs" in r else ""
         print(f"{name:18s} {r['protocol']:7s} {r['n_train']:6d} train frames, {r['seconds']:7.1f} s{extra}")
@@ -44,7 +44,7 @@ def evaluate(data: str | Path, run: str | Path, out: str | Path | None = None, *
     from ..learn.evaluate import evaluate as evaluate_methods  # torch-bound (1.7 s): only when judging
 
     out = Path(run) / "evaluation" if out is None else Path(out)
-    results = evaluate_methods(data, run, out, seed, progress=progress, methods=methods)
+    results = evaluate_methods(data, run, out, seed=seed, progress=progress, methods=methods)
     print((out / "tables.md").read_text())
     print(f"written to {out}: tables.md, results.csv, metrics.json, confusion_*.png, "
           "activation_maximisation_depth.png")

@@ -58,7 +58,7 @@ def read_video(path) -> tuple[np.ndarray, int, np.ndarray]:
     return np.concatenate(chunks), fs, np.array(sorted(times)) - (a0 or 0.0)
 
 
-def video_images(path, times_s, width: int | None = None) -> np.ndarray:
+def video_images(path, times_s, *, width: int | None = None) -> np.ndarray:
     """Grayscale pictures (K, H, W) uint8 of a video at the given times (s from the sound's start;
     the picture shown then: the last one that started), decoded in one pass (FFmpeg's threads),
     scaled to ``width`` pixels across (aspect kept) if given."""
@@ -98,7 +98,7 @@ def _pictures(container, times_s: np.ndarray, width: int | None) -> np.ndarray:
     return np.stack(out)
 
 
-def write_video(path, gray: np.ndarray, fps: float, audio: np.ndarray, fs: int, audio_codec: str = "flac",
+def write_video(path, gray: np.ndarray, fps: float, audio: np.ndarray, fs: int, *, audio_codec: str = "flac",
                 audio_bit_rate: int = 256_000) -> None:
     """Mux grayscale pictures (K, H, W) uint8 (an array, or any iterable of (H, W) pictures) at
     ``fps`` and a mono sound (float in [-1, 1]) into a video file with PyAV (H.264; the sound as

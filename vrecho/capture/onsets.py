@@ -91,7 +91,7 @@ def matched_envelope(audio, emitted, fs: int = FS) -> np.ndarray:
     return analytic_envelope(x, analytic_filter(s, n), n)[:x.size - s.size + 1] / np.linalg.norm(s)
 
 
-def find_onsets(audio, fs: int = FS, emitted=None, period_s: float = PERIOD_S, min_snr_db: float = 12.0,
+def find_onsets(audio, fs: int = FS, *, emitted=None, period_s: float = PERIOD_S, min_snr_db: float = 12.0,
                 tolerance_s: float = 0.01) -> Onsets:
     """The pulse train's onsets in a recording (see the module's notes).
 
@@ -169,7 +169,7 @@ def find_onsets(audio, fs: int = FS, emitted=None, period_s: float = PERIOD_S, m
     return Onsets(samples, 20 * np.log10(env[idx] / floor), np.array(missing), period / fs, fs)
 
 
-def cut_frames(audio, onsets: Onsets, length_s: float = 1.0, mic_offset_m: float | None = None) -> np.ndarray:
+def cut_frames(audio, onsets: Onsets, *, length_s: float = 1.0, mic_offset_m: float | None = None) -> np.ndarray:
     """PROTOCOL.md's frames: ``length_s`` of the recording from each pulse's emission (the direct
     sound's onset less its flight from the loudspeaker, ``mic_offset_m`` away: PROTOCOL's device
     by default), resampled to 44.1 kHz, each shifted by its fraction of a sample (a linear phase)

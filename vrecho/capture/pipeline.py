@@ -96,14 +96,14 @@ def open_capture(video=None, audio=None, images=None, poses=None, mesh=None, *, 
         video_start = float(vtimes[0]) if len(vtimes) else 0.0
     posed = user_mesh = None
     if poses is not None:
-        posed = read_poses(poses, image_fps, x.size / fs, video_start)
+        posed = read_poses(poses, image_fps, x.size / fs, video_start_s=video_start)
         user_mesh = read_mesh(mesh).transform(posed.to_z_up)
     files = image_files(Path(images), None if posed is None else posed.names) if images is not None else None
     return Recording(x, fs, None if video is None else Path(video), video_start, files, image_fps, posed, user_mesh,
                      labels, emitter_distance_m)
 
 
-def answers(classifier, frames: np.ndarray, emitted: np.ndarray, images=None) -> list[dict]:
+def answers(classifier, frames: np.ndarray, emitted: np.ndarray, *, images=None) -> list[dict]:
     """EchoCNN's answers for frames (K, 44100) at 44.1 kHz, the probe ``emitted`` known (and the
     crops ``images`` (K, 64, 25), if given), as ``frames.csv``'s columns."""
     preds = classifier.predict_batch(frames, FS, images=images, emitted=emitted) if len(frames) else []
@@ -131,7 +131,7 @@ def analyse(rec: Recording, *, classifier=None, progress: bool = False) -> Analy
     times = onsets.seconds[:len(frames)]
     width = VIEW_WIDTH if posed is not None else None
     if rec.video is not None:
-        shots = video_images(rec.video, np.r_[times, posed.time_s if posed is not None else []], width)
+        shots = video_images(rec.video, np.r_[times, posed.time_s if posed is not None else []], width=width)
         frame_pictures, pictures = shots[:len(times)], shots[len(times):]
     elif rec.files is not None:
         file_times = posed.time_s if posed is not None else image_times([f.name for f in rec.files], rec.image_fps)
@@ -159,6 +159,6 @@ def analyse(rec: Recording, *, classifier=None, progress: bool = False) -> Analy
             for i in facing(views, hole):
                 if i in frame_of and "hole" not in rows[frame_of[i]]:
                     crop, inside = crop_view(views[i], hole.corners())
-                    a = answers(classifier, frames[frame_of[i]][None], emitted, crop[None] if inside >= 0.98 else None)[0]
+                    a = answers(classifier, frames[frame_of[i]][None], emitted, images=crop[None] if inside >= 0.98 else None)[0]
                     rows[frame_of[i]].update(a, hole=h)
     return Analysis(onsets, frames, times, rows, frame_pictures, result)

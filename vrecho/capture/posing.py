@@ -26,7 +26,7 @@ MAX_POSE_GAP_S = 1.0
 """A pulse takes the pose of the pictures around it (interpolated) when one lies this close."""
 
 
-def interpolate_poses(times, key_times, key_poses, max_gap_s: float = MAX_POSE_GAP_S) -> tuple[np.ndarray, np.ndarray]:
+def interpolate_poses(times, key_times, key_poses, *, max_gap_s: float = MAX_POSE_GAP_S) -> tuple[np.ndarray, np.ndarray]:
     """Camera-to-world poses (K, 4, 4) at ``times`` (s) from posed pictures at ``key_times``:
     positions linear and rotations spherical between the two pictures around each time, or the
     nearest picture's beyond either end. ``ok`` (K,) says which times have a picture within
@@ -48,7 +48,7 @@ def interpolate_poses(times, key_times, key_poses, max_gap_s: float = MAX_POSE_G
     return out, ok
 
 
-def view_intrinsics(camera, width: int = VIEW_WIDTH) -> tuple[np.ndarray, int, int]:
+def view_intrinsics(camera, *, width: int = VIEW_WIDTH) -> tuple[np.ndarray, int, int]:
     """A COLMAP camera's pinhole matrix scaled to ``width`` pixels across (pixel centres at
     integers), and the scaled size."""
     s = width / camera.width
@@ -74,7 +74,7 @@ class Poses:
     to_z_up: np.ndarray
 
 
-def read_poses(folder, image_fps: float, duration_s: float, video_start_s: float = 0.0) -> Poses:
+def read_poses(folder, image_fps: float, duration_s: float, *, video_start_s: float = 0.0) -> Poses:
     """COLMAP's text model in ``folder`` for a capture of ``duration_s`` seconds, its pictures
     numbered from 1 at ``image_fps`` (:func:`vrecho.colmap.image_times`) from the video's first
     picture, ``video_start_s`` after the sound's start. Checked: one camera, pictures within the
@@ -106,7 +106,7 @@ def read_poses(folder, image_fps: float, duration_s: float, video_start_s: float
 
 
 def posed_scan(mesh, poses: Poses, pictures: np.ndarray, frames: np.ndarray, frame_times: np.ndarray,
-               frame_pictures: np.ndarray, emitted: np.ndarray, min_hit: float = 0.3):
+               frame_pictures: np.ndarray, emitted: np.ndarray, *, min_hit: float = 0.3):
     """A :class:`~vrecho.reconstruct.Scan` of a user's mesh and capture: one view per posed
     picture and one per pulse frame (the pose interpolated at its emission), each with the depth
     the mesh gives along its rays (:func:`~vrecho.camera.mesh_depth`) and its picture (uint8 at

@@ -70,7 +70,7 @@ from .tracks import Track
 from .view import look_all
 
 
-def ranging_probe(fs: int, duration_s: float = 0.005, f0: float = 4000.0, f1: float = 20000.0) -> np.ndarray:
+def ranging_probe(fs: int, *, duration_s: float = 0.005, f0: float = 4000.0, f1: float = 20000.0) -> np.ndarray:
     """The ranging probe: a linear chirp from ``f0`` to ``f1`` Hz over ``duration_s``, Tukey
     window (25 %), peak 0.5."""
     if f1 >= fs / 2:
@@ -131,7 +131,7 @@ class BoundaryMonitor:
         single noise peaks from mattering).
     """
 
-    def __init__(self, fs: int = 48000, period_s: float = 0.04, max_range_m: float = 4.0, min_range_m: float = 0.12,
+    def __init__(self, fs: int = 48000, *, period_s: float = 0.04, max_range_m: float = 4.0, min_range_m: float = 0.12,
                  mic_offset_m: float = 0.07, caution_ttc_s: float = 2.0, caution_m: float = 1.0, stop_m: float = 0.5,
                  hysteresis_m: float = 0.1, approach_m: float = 0.12, miss_m: float = 0.4, threshold: float = 4.5):
         if fs not in (44100, 48000):
@@ -259,7 +259,7 @@ class BoundaryMonitor:
     def alert(self) -> Alert:
         return self._alert
 
-    def see(self, image, depth, intrinsics, model=None) -> str | None:
+    def see(self, image, depth, intrinsics, *, model=None) -> str | None:
         """Show the monitor the headset camera's latest frame: what the surfaces ahead are.
 
         Each surface the alert rests on or the wearer nears (the nearest, up to three) is looked for in
@@ -284,7 +284,7 @@ class BoundaryMonitor:
                        and (tr.speed or 0.0) < -0.2), key=lambda tr: tr.predict(t))
         asked = [(tr, tr.predict(t)) for tr in ([verdict] if verdict is not None else []) + near[:3 - (verdict is not None)]]
         asked = [(tr, d) for tr, d in asked if d > self.min_range_m]
-        for (tr, _), v in zip(asked, look_all(image, depth, intrinsics, [d for _, d in asked], model)):
+        for (tr, _), v in zip(asked, look_all(image, depth, intrinsics, [d for _, d in asked], model=model)):
             if v is not None:
                 tr.views[v.surface] = tr.views.get(v.surface, 0.0) + v.confidence
         return verdict.surface if verdict is not None else None

@@ -31,7 +31,7 @@ class Track:
     def predict(self, t: float) -> float:
         return self.d_hat + (self.speed or 0.0) * (t - self.times[-1])
 
-    def update(self, t: float, d: float, strength: float, alpha: float = 0.6, beta: float = 0.3) -> None:
+    def update(self, t: float, d: float, strength: float, *, alpha: float = 0.6, beta: float = 0.3) -> None:
         """An alpha-beta filter of distance and speed (it follows a wearer who starts or stops
         walking within a few pulses), and the raw history."""
         if not self.times:
@@ -55,7 +55,7 @@ class Track:
             return self.times, self.dists
         return [*self.times, extra[0]], [*self.dists, extra[1]]
 
-    def explained_by(self, offsets: list[float], span_s: float = 0.6, extra=None) -> bool:
+    def explained_by(self, offsets: list[float], *, span_s: float = 0.6, extra=None) -> bool:
         """Whether the track is better read as a second-order echo that passes by at one of
         ``offsets`` (the distances of surfaces that stay put: floor, ceiling, side walls; a
         wall's echo by way of the ceiling nears like a point that far overhead) than as a
@@ -92,7 +92,7 @@ class Track:
         k = max(bisect.bisect_right(t, t[-1] - span_s) - 1, 0)
         return float(self.dists[k] - self.dists[-1])
 
-    def in_the_way(self, miss_m: float, spans_s=(0.6, 0.45, 0.32), extra=None) -> bool | None:
+    def in_the_way(self, miss_m: float, *, spans_s=(0.6, 0.45, 0.32), extra=None) -> bool | None:
         """Whether the wearer will pass within ``miss_m`` of the surface (closest point of
         approach). A point at lateral offset ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, a
         quadratic in t (fitted to the last ``span_s``) whose minimum is a^2; a surface straight

@@ -131,7 +131,7 @@ def pane_crop(image, depth, intrinsics, distance_m: float) -> tuple[float, np.nd
     return _pane(*_frame(image, depth, intrinsics), distance_m)
 
 
-def look(image, depth, intrinsics, distance_m: float, model: EchoCNN | None = None) -> SurfaceView | None:
+def look(image, depth, intrinsics, distance_m: float, *, model: EchoCNN | None = None) -> SurfaceView | None:
     """What a camera frame says of the surface an echo found ``distance_m`` (m, from the
     loudspeaker) straight ahead.
 
@@ -155,10 +155,10 @@ def look(image, depth, intrinsics, distance_m: float, model: EchoCNN | None = No
     SurfaceView, or None when the frame cannot tell: the depth sensor returned nothing
     anywhere (off, or blinded), or something nearer than the echo fills the view ahead.
     """
-    return look_all(image, depth, intrinsics, [distance_m], model)[0]
+    return look_all(image, depth, intrinsics, [distance_m], model=model)[0]
 
 
-def look_all(image, depth, intrinsics, distances_m, model: EchoCNN | None = None) -> list[SurfaceView | None]:
+def look_all(image, depth, intrinsics, distances_m, *, model: EchoCNN | None = None) -> list[SurfaceView | None]:
     """:func:`look` for several echoes' distances in one frame (the frame read once, the crops
     classified in one batch)."""
     g, z, cone = _frame(image, depth, intrinsics)
@@ -168,7 +168,7 @@ def look_all(image, depth, intrinsics, distances_m, model: EchoCNN | None = None
     panes = [_pane(g, z, cone, d) for d in distances_m]
     blind = not np.any(z > 0)  # a pane only where the sensor returns something somewhere
     crops = [] if blind else [crop for _, crop in panes if crop is not None]
-    p_mirror = iter(material_probability(np.stack(crops), model) if crops else ())
+    p_mirror = iter(material_probability(np.stack(crops), model=model) if crops else ())
     out = []
     for agree, crop in panes:
         if agree >= 0.5:
@@ -181,7 +181,7 @@ def look_all(image, depth, intrinsics, distances_m, model: EchoCNN | None = None
     return out
 
 
-def material_probability(crops: np.ndarray, model: EchoCNN | None = None) -> np.ndarray:
+def material_probability(crops: np.ndarray, *, model: EchoCNN | None = None) -> np.ndarray:
     """P(mirror) of each 64 x 25 uint8 crop (N, 64, 25)."""
     import torch  # heavy (1.7 s): the audio path imports this module and never classifies
 

@@ -91,7 +91,7 @@ def _scene_rows(out: Path, index: int, preset_name: str, seed: int, split: str, 
 
     preset = PRESETS[preset_name]
     rng = np.random.default_rng([seed, index])
-    scene = random_scene(rng, f"scene_{index:04d}", preset.n_poses, preset.n_sources)
+    scene = random_scene(rng, f"scene_{index:04d}", n_poses=preset.n_poses, n_sources=preset.n_sources)
     scene.save(out / "scenes" / f"scene_{index:04d}.json")
     world = World(scene)
     n_irs = preset.n_poses + preset.n_sources
@@ -162,7 +162,7 @@ def _worker_init() -> None:
         os.environ[var] = "1"
 
 
-def generate(out: str | Path, preset: str = "tiny", seed: int = 0, workers: int | None = None,
+def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: int | None = None,
              cache: str | Path | None = None, progress: bool = True) -> Path:
     """Generate (or finish) a dataset in ``out``.
 
@@ -278,7 +278,7 @@ class Dataset:
     def __len__(self) -> int:
         return len(self.labels["frame"])
 
-    def mask(self, split: str | None = None, kind: str | None = "echo", heard: bool | None = None) -> np.ndarray:
+    def mask(self, split: str | None = None, kind: str | None = "echo", *, heard: bool | None = None) -> np.ndarray:
         """Boolean mask of frames by room split, frame kind and whether the sound is a train sound."""
         m = np.ones(len(self), bool)
         if split is not None:
@@ -299,7 +299,7 @@ class Dataset:
         _, first = np.unique(self.labels["ir"][m], return_index=True)
         return np.where(m)[0][first]
 
-    def probe_frames(self, split: str, probes: tuple[str, ...], seed: int = 0, progress: bool = False):
+    def probe_frames(self, split: str, probes: tuple[str, ...], *, seed: int = 0, progress: bool = False):
         """The product protocol's frames: each echo impulse response of a split heard with known
         probes, rendered now from the stored responses (noise, self-noise and gain drawn as in
         :func:`generate`).

@@ -54,7 +54,7 @@ class Method:
         return "".join(c if c.isalnum() else "_" for c in self.name.lower()).strip("_")
 
     def model(self) -> EchoCNN:
-        return EchoCNN(self.inputs, self.fusion, wave_layers=self.wave_layers)
+        return EchoCNN(self.inputs, fusion=self.fusion, wave_layers=self.wave_layers)
 
     def path(self, run) -> Path:
         """Where a run folder keeps this method's trained model."""
@@ -93,7 +93,7 @@ def method(name: str) -> Method:
 class Frames:
     """The frames of one protocol and split, with every input any method asks for, loaded once."""
 
-    def __init__(self, ds, protocol: str, split: str, seed: int = 0, progress: bool = False):
+    def __init__(self, ds, protocol: str, split: str, *, seed: int = 0, progress: bool = False):
         self.ds, self.protocol, self.split, self.seed, self.progress = ds, protocol, split, seed, progress
         self.audio = self.emitted = None  # read or rendered when an input needs them
         if protocol == "paper":
@@ -114,7 +114,7 @@ class Frames:
 
     def _audio(self) -> np.ndarray:
         if self.audio is None and self.protocol == "product":
-            self.audio, self.emitted, _, _ = self.ds.probe_frames(self.split, self.probes, self.seed, self.progress)
+            self.audio, self.emitted, _, _ = self.ds.probe_frames(self.split, self.probes, seed=self.seed, progress=self.progress)
         elif self.audio is None:
             self.audio = _read_rows(self.ds.audio, self.rows).astype(np.float32)
         return self.audio
@@ -160,7 +160,7 @@ def _read_rows(array, rows: np.ndarray) -> np.ndarray:
 class Harness:
     """Frames of every protocol and split, loaded on demand and shared by the methods."""
 
-    def __init__(self, data, seed: int = 0, progress: bool = True):
+    def __init__(self, data, *, seed: int = 0, progress: bool = True):
         self.ds = open_dataset(data)
         self.seed, self.progress = seed, progress
         self._frames: dict[tuple[str, str], Frames] = {}
@@ -168,11 +168,11 @@ class Harness:
     def frames(self, protocol: str, split: str) -> Frames:
         key = (protocol, split)
         if key not in self._frames:
-            self._frames[key] = Frames(self.ds, protocol, split, self.seed, self.progress)
+            self._frames[key] = Frames(self.ds, protocol, split, seed=self.seed, progress=self.progress)
         return self._frames[key]
 
 
-def train_methods(data, out, methods=None, seed: int = 0, epochs: int = 40, patience: int = 6,
+def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, patience: int = 6,
                   progress: bool = True) -> dict[str, dict]:
     """Train every method (or those named) on a dataset, resumably, into the run folder ``out``.
 
@@ -181,7 +181,7 @@ def train_methods(data, out, methods=None, seed: int = 0, epochs: int = 40, pati
     """
     out = ensure_writable_dir(out)
     chosen = [method(m) for m in methods] if methods else list(METHODS)
-    harness = Harness(data, seed, progress)
+    harness = Harness(data, seed=seed, progress=progress)
     m = harness.ds.manifest
     identity = {"format": "vrecho-run", "dataset": {k: m[k] for k in ("preset", "seed", "n_frames")}, "seed": seed}
     run_path = out / "run.json"
@@ -258,11 +258,11 @@ COLUMNS = (("open", "open/closed %"), ("material", "material %"), ("depth_ft", "
            ("src_cell", "source cell %"), ("src_median_m", "source median m"))
 
 
-def evaluate(data, run, out, seed: int = 0, progress: bool = True, methods=None) -> dict[str, dict]:
+def evaluate(data, run, out, *, seed: int = 0, progress: bool = True, methods=None) -> dict[str, dict]:
     """Judge every trained method on the test frames; write tables (Markdown and CSV), confusion
     matrices and the activation-maximisation figure into ``out``. Returns the metrics."""
     out = ensure_writable_dir(out)
-    harness = Harness(data, seed, progress)
+    harness = Harness(data, seed=seed, progress=progress)
     chosen = [method(m) for m in methods] if methods else [m for m in METHODS if _trained(run, m)]
     if not chosen:
         raise VrechoError(f"{run}: no trained methods; run `vrecho train --data {data} --out {run}` first")
@@ -401,7 +401,7 @@ def confusion_figures(outputs: dict, methods, harness: Harness, out: Path) -> li
     return paths
 
 
-def activation_maximisation(models: dict[str, EchoCNN], path, steps: int = 300, seed: int = 0) -> Path:
+def activation_maximisation(models: dict[str, EchoCNN], path, *, steps: int = 300, seed: int = 0) -> Path:
     """For each depth class of the depth head, the input that excites it most: gradient ascent on
     the class logit with an L2 pull toward a neutral input and a smoothness penalty.
 

@@ -61,7 +61,7 @@ def headset_views(rng: np.random.Generator, name: str):
             width = int(rng.choice([240, 320, 400]))
             camera = Camera(width, width * 3 // 4, float(rng.uniform(60, 110)))
             world = world or World(scene)
-            view = render_view(world, camera_pose(emitter + [0.0, 0.0, MIC_ABOVE_EMITTER_M], forward, up), camera)
+            view = render_view(world, camera_pose(emitter + [0.0, 0.0, MIC_ABOVE_EMITTER_M], forward, up), camera=camera)
             echo = dist + rng.normal(0.0, 0.02)
             _, crop = pane_crop(view.gray, view.depth, view.intrinsics, echo)
             if crop is not None:
@@ -72,7 +72,7 @@ def _room_views(seed: int) -> list:
     return list(headset_views(np.random.default_rng(seed), f"view_{seed}"))
 
 
-def make_dataset(n_rooms: int, seed: int = TRAIN_SEED, jobs: int = 1, progress: bool = True) -> dict[str, np.ndarray]:
+def make_dataset(n_rooms: int, *, seed: int = TRAIN_SEED, jobs: int = 1, progress: bool = True) -> dict[str, np.ndarray]:
     """Crops of ``n_rooms`` rooms drawn from ``seed`` on (room ``k`` from ``seed + k``, so the
     data do not depend on ``jobs``, the processes that render them): ``crops`` (N, 64, 25) uint8,
     ``mirror`` (N,) bool, ``distance_m`` (N,), ``room`` (N,)."""
@@ -87,7 +87,7 @@ def make_dataset(n_rooms: int, seed: int = TRAIN_SEED, jobs: int = 1, progress: 
     return {k: np.asarray(v) for k, v in out.items()}
 
 
-def train(data: dict[str, np.ndarray], epochs: int = 60, seed: int = 0, progress: bool = True) -> tuple[EchoCNN, dict]:
+def train(data: dict[str, np.ndarray], *, epochs: int = 60, seed: int = 0, progress: bool = True) -> tuple[EchoCNN, dict]:
     """EchoCNN's visual branch trained on :func:`make_dataset`'s crops with
     :func:`vrecho.learn.train.fit` (a tenth of the rooms held out for early stopping), its material
     head alone: the other heads' targets are left out (a depth guessed from a picture only
@@ -114,7 +114,7 @@ def train(data: dict[str, np.ndarray], epochs: int = 60, seed: int = 0, progress
     x_va, y_va = split(np.flatnonzero(is_val), False)
     history = fit(model, x_tr, y_tr, x_va, y_va, epochs=epochs, patience=8, seed=seed, progress=progress,
                   desc="headset view")
-    p = material_probability(data["crops"][is_val], model)
+    p = material_probability(data["crops"][is_val], model=model)
     figures = {"train_crops": int((~is_val).sum()), "val_crops": int(is_val.sum()),
                "val_accuracy": float(np.mean((p > 0.5) == data["mirror"][is_val])), "epochs": history.epochs,
                "seconds": history.seconds}
@@ -134,10 +134,10 @@ def main(argv: list[str] | None = None) -> None:
     if args.data and Path(args.data).is_file():
         data = dict(np.load(args.data))
     else:
-        data = make_dataset(args.rooms, args.seed, args.jobs)
+        data = make_dataset(args.rooms, seed=args.seed, jobs=args.jobs)
         if args.data:
             np.savez_compressed(args.data, **data)
-    model, figures = train(data, args.epochs)
+    model, figures = train(data, epochs=args.epochs)
     save(model, args.out)
     print(f"{args.out}: {figures}")
 

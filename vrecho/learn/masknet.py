@@ -75,7 +75,7 @@ def _examples(args):
     return path
 
 
-def make_examples(data_dir: Path, rooms: int = 1200, jobs: int = 2, seed: int = SEED) -> list[Path]:
+def make_examples(data_dir: Path, *, rooms: int = 1200, jobs: int = 2, seed: int = SEED) -> list[Path]:
     """Simulate ``rooms`` training walks on ``jobs`` processes into ``data_dir`` (reused when
     its shards were made for the same rooms and seed)."""
     data_dir = Path(data_dir)
@@ -110,7 +110,7 @@ def _load_examples(paths: list[Path], dev: str):
     return out["f"], out["m"], out["t"]
 
 
-def train(out: Path, rooms: int = 1200, epochs: int = 16, lr: float = 2e-3, init: Path | None = None,
+def train(out: Path, *, rooms: int = 1200, epochs: int = 16, lr: float = 2e-3, init: Path | None = None,
           jobs: int = 2, seed: int = SEED, width: int = 32, data_dir: Path | None = None,
           progress: bool = True) -> list[float]:
     """Simulate ``rooms`` training walks (into ``data_dir``, a temporary folder if None), train a
@@ -121,7 +121,7 @@ def train(out: Path, rooms: int = 1200, epochs: int = 16, lr: float = 2e-3, init
     ensure_writable_dir(Path(out).parent)
     dev = "cuda" if torch.cuda.is_available() else "cpu"
     with tempfile.TemporaryDirectory() as tmp:
-        f, m, t = _load_examples(make_examples(Path(data_dir or tmp), rooms, jobs, seed), dev)
+        f, m, t = _load_examples(make_examples(Path(data_dir or tmp), rooms=rooms, jobs=jobs, seed=seed), dev)
     torch.manual_seed(0)
     model = masknet_class()(width).to(dev)
     if init is not None:
@@ -173,7 +173,7 @@ def main():
     ap.add_argument("--out", type=Path, required=True)
     a = ap.parse_args()
     t0 = time.time()
-    train(a.out, a.rooms, a.epochs, a.lr, a.init, a.jobs, a.seed, a.width, a.data)
+    train(a.out, rooms=a.rooms, epochs=a.epochs, lr=a.lr, init=a.init, jobs=a.jobs, seed=a.seed, width=a.width, data_dir=a.data)
     print(f"{a.out} written in {time.time() - t0:.0f} s")
 
 

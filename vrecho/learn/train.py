@@ -52,7 +52,7 @@ def _axis_logits(scores: torch.Tensor) -> list[torch.Tensor]:
     return list(torch.split(scores, SRC_CELLS, dim=1))
 
 
-def loss_fn(out: dict[str, torch.Tensor], y: dict[str, torch.Tensor], depth_weight: float = 2.0) -> torch.Tensor:
+def loss_fn(out: dict[str, torch.Tensor], y: dict[str, torch.Tensor], *, depth_weight: float = 2.0) -> torch.Tensor:
     """Sum of the heads' losses over the frames each applies to: cross-entropy for classes, smooth
     L1 on depth (closed surfaces) and on source position, in metres."""
     loss = out["open"].sum() * 0.0
@@ -85,7 +85,7 @@ def _subset(x: dict[str, torch.Tensor], idx) -> dict[str, torch.Tensor]:
     return {k: v[idx] for k, v in x.items()}
 
 
-def predict_batches(model: EchoCNN, x: dict[str, torch.Tensor], batch_size: int = 256) -> dict[str, torch.Tensor]:
+def predict_batches(model: EchoCNN, x: dict[str, torch.Tensor], *, batch_size: int = 256) -> dict[str, torch.Tensor]:
     """The model's outputs for many frames, in evaluation mode, a batch at a time."""
     model.eval()
     n = len(next(iter(x.values())))
@@ -96,7 +96,7 @@ def predict_batches(model: EchoCNN, x: dict[str, torch.Tensor], batch_size: int 
     return {k: parts[0][k] if k == "depth_at" else torch.cat([p[k] for p in parts]) for k in parts[0]}
 
 
-def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, epochs: int = 40,
+def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, *, epochs: int = 40,
         batch_size: int = 64, lr: float = 1e-3, patience: int = 6, seed: int = 0,
         checkpoint: str | Path | None = None, progress: bool = True, desc: str = "train") -> History:
     """Train with Adam, keep the weights of the best validation loss, stop after ``patience``

@@ -117,7 +117,7 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
                 # The specular echo comes from the foot of the perpendicular: only where it falls in
                 # the hole does the echo speak of the hole (else of the wall beside it).
                 foot = pose.emitter - scan_depth * n
-                row["foot_in_hole"] = bool(hole.contains(foot[None], -0.05)[0])
+                row["foot_in_hole"] = bool(hole.contains(foot[None], margin_m=-0.05)[0])
             else:
                 row["depth_m"] = pred.depth_m
             row["offset_m"] = row["depth_m"] - float(n @ pose.emitter)
@@ -151,7 +151,7 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
     return out
 
 
-def mirror_evidence(mesh, hole: Hole, walls: list[Plane], cameras: np.ndarray, tolerance_m: float = 0.06,
+def mirror_evidence(mesh, hole: Hole, walls: list[Plane], cameras: np.ndarray, *, tolerance_m: float = 0.06,
                     shifts_m: np.ndarray = np.arange(-0.06, 0.061, 0.02)) -> tuple[float, int]:
     """How much of what the camera saw through a hole is the room itself, mirrored.
 

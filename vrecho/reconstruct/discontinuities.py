@@ -75,7 +75,7 @@ class Hole:
         """The outline in world coordinates (K, 3)."""
         return self.plane.to_world(self.outline, offset)
 
-    def contains(self, points: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
+    def contains(self, points: np.ndarray, *, margin_m: float = 0.0) -> np.ndarray:
         """Whether world points project into the outline (convex; widened by about ``margin_m``)."""
         uz = self.plane.to_wall(points)
         a = self.outline
@@ -86,7 +86,7 @@ class Hole:
         return np.all(sign * cross >= -margin_m, axis=1)
 
 
-def wall_planes(vertices: np.ndarray, cameras: np.ndarray, distance_m: float = 0.03, min_share: float = 0.003,
+def wall_planes(vertices: np.ndarray, cameras: np.ndarray, *, distance_m: float = 0.03, min_share: float = 0.003,
                 max_planes: int = 20, seed: int = 0) -> list[Plane]:
     """The room's walls: planes found by RANSAC (open3d ``segment_plane``), one after another, of
     which the vertical ones nearest the cameras in each direction are kept (a phantom room
@@ -204,7 +204,7 @@ def _vertical_fit(points: np.ndarray, centre: np.ndarray) -> Plane:
     return Plane(n, d, points)
 
 
-def holes(plane: Plane, views: list[View], walls: list[Plane] = (), cell_m: float = 0.03, min_area_m2: float = 0.1,
+def holes(plane: Plane, views: list[View], walls: list[Plane] = (), *, cell_m: float = 0.03, min_area_m2: float = 0.1,
           margin_m: float = 0.1) -> list[Hole]:
     """Regions of a wall plane that the depth camera saw through.
 
@@ -253,7 +253,7 @@ def holes(plane: Plane, views: list[View], walls: list[Plane] = (), cell_m: floa
     return out
 
 
-def beyond_walls(vertices: np.ndarray, walls: list[Plane], margin_m: float = 0.1) -> np.ndarray:
+def beyond_walls(vertices: np.ndarray, walls: list[Plane], *, margin_m: float = 0.1) -> np.ndarray:
     """Which vertices lie more than ``margin_m`` behind a wall plane: what the camera saw through
     glass or an opening, or the phantom room a mirror makes (the repair tells them apart)."""
     v = np.asarray(vertices, float)
@@ -263,7 +263,7 @@ def beyond_walls(vertices: np.ndarray, walls: list[Plane], margin_m: float = 0.1
     return out
 
 
-def facing(views: list[View], hole: Hole, max_incidence_deg: float = 25.0,
+def facing(views: list[View], hole: Hole, *, max_incidence_deg: float = 25.0,
            depth_range_m: tuple[float, float] = (0.25, 3.5), margin_m: float = 0.05) -> list[int]:
     """Frames that look at a hole: the camera's axis meets its outline (widened by ``margin_m``)
     within ``max_incidence_deg`` of the wall's normal, from ``depth_range_m`` (EchoCNN's range)."""
@@ -275,12 +275,12 @@ def facing(views: list[View], hole: Hole, max_incidence_deg: float = 25.0,
         depth = float(n @ c + offset)
         if cos < np.cos(np.radians(max_incidence_deg)) or not depth_range_m[0] <= depth <= depth_range_m[1]:
             continue
-        if hole.contains((c + depth / cos * f)[None], margin_m)[0]:
+        if hole.contains((c + depth / cos * f)[None], margin_m=margin_m)[0]:
             out.append(i)
     return out
 
 
-def seen_through(points: np.ndarray, hole: Hole, cameras: np.ndarray, margin_m: float = 0.1,
+def seen_through(points: np.ndarray, hole: Hole, cameras: np.ndarray, *, margin_m: float = 0.1,
                  max_cameras: int = 12) -> np.ndarray:
     """Which points (bool (N,)) lie behind a hole's plane where a camera saw them through the
     hole: the line from some camera (at most ``max_cameras`` of those in front, evenly spread)
@@ -298,5 +298,5 @@ def seen_through(points: np.ndarray, hole: Hole, cameras: np.ndarray, margin_m: 
         p = points[idx]
         dc, dp = float(c @ n + offset), p @ n + offset
         t = dc / (dc - dp)  # where the segment from the camera meets the plane
-        out[idx[hole.contains(c + t[:, None] * (p - c), 0.05)]] = True
+        out[idx[hole.contains(c + t[:, None] * (p - c), margin_m=0.05)]] = True
     return out

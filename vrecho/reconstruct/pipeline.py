@@ -115,7 +115,7 @@ def reconstruct(scan: Scan, *, hear: Callable | None = None, decide="echocnn", v
     decisions = decide(found, scan.views, echoes, mesh=scan.mesh, walls=walls)
     seconds["decide"] = time.perf_counter() - t
     t = time.perf_counter()
-    repaired, surfaces, actions = repair(scan.mesh, found, decisions, scan.cameras, variant)
+    repaired, surfaces, actions = repair(scan.mesh, found, decisions, scan.cameras, variant=variant)
     seconds["repair"] = time.perf_counter() - t
     seconds["total_without_hearing"] = sum(v for k, v in seconds.items() if k != "hear")
     return Reconstruction(scan, walls, found, decisions, repaired, surfaces, actions, variant, seconds)

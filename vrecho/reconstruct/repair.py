@@ -40,7 +40,7 @@ class Surface:
         return float(0.5 * np.linalg.norm(np.cross(p[1:-1], p[2:]).sum(axis=0)))
 
 
-def repair(mesh, holes_: list[Hole], decisions: list[Decision], cameras: np.ndarray, variant: str = "simplified",
+def repair(mesh, holes_: list[Hole], decisions: list[Decision], cameras: np.ndarray, *, variant: str = "simplified",
            min_component_triangles: int = 200, rim_m: float = 0.06):
     """The paper's Algorithm 1: fill what is closed, empty what a mirror made, leave openings open.
 

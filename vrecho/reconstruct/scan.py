@@ -68,7 +68,7 @@ class Scan:
         return folder
 
 
-def fuse(views: list[View], voxel_m: float = 0.03, trunc_voxels: float = 4.0, weight_threshold: float = 1.0,
+def fuse(views: list[View], *, voxel_m: float = 0.03, trunc_voxels: float = 4.0, weight_threshold: float = 1.0,
          progress: bool = False):
     """TSDF fusion of depth and grayscale frames into a coloured triangle mesh.
 
@@ -121,7 +121,7 @@ def fuse(views: list[View], voxel_m: float = 0.03, trunc_voxels: float = 4.0, we
     return grid.extract_triangle_mesh(weight_threshold=weight_threshold).to_legacy()
 
 
-def load_scan(folder: str | Path, voxel_m: float = 0.03, progress: bool = False) -> Scan:
+def load_scan(folder: str | Path, *, voxel_m: float = 0.03, progress: bool = False) -> Scan:
     """A user's capture, from a folder:
 
     ``frames.npz`` (required)
@@ -156,7 +156,7 @@ def load_scan(folder: str | Path, voxel_m: float = 0.03, progress: bool = False)
     if mesh_path.is_file():
         mesh = read_mesh(mesh_path)
     else:
-        mesh = fuse(views, voxel_m, progress=progress)
+        mesh = fuse(views, voxel_m=voxel_m, progress=progress)
     echoes = None
     if (folder / "echoes.npz").is_file():
         with np.load(folder / "echoes.npz") as f:

@@ -67,7 +67,7 @@ def _octave_bands(fs: int):
     return pra.acoustics.OctaveBandsFactory(fs=fs, n_fft=512, keep_dc=True, base_frequency=BANDS_HZ[0])
 
 
-def build_room(scene: Scene, fs: int = FS, sim: Simulation = DEFAULT_SIMULATION):
+def build_room(scene: Scene, fs: int = FS, *, sim: Simulation = DEFAULT_SIMULATION):
     """A ``pyroomacoustics.Room`` of the scene's patches, each with its own frequency-dependent
     material (resampled to the simulator's bands so every wall has the same ones)."""
     import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
@@ -135,7 +135,7 @@ def _cache_key(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: int, sim:
 
 
 def impulse_responses(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: int = FS,
-                      sim: Simulation = DEFAULT_SIMULATION, cache: str | Path | bool | None = None,
+                      *, sim: Simulation = DEFAULT_SIMULATION, cache: str | Path | bool | None = None,
                       facing: np.ndarray | None = None) -> np.ndarray:
     """Simulated impulse responses from one source to each microphone.
 
@@ -187,7 +187,7 @@ def impulse_responses(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: in
             except (OSError, ValueError):
                 pass  # a damaged cache entry is simulated again and replaced
     pra.random.seed(int(key[:8], 16))  # ray tracing repeatable for the same key
-    room = build_room(scene, fs, sim)
+    room = build_room(scene, fs, sim=sim)
     if directive:
         room.add_source(source, directivity=emitter_directivity(facing, scene.emitter_p))
     else:
@@ -219,12 +219,12 @@ def emitter_directivity(facing: np.ndarray, p: float):
     return CardioidFamily(direction, p)
 
 
-def device_impulse_response(scene: Scene, pose: DevicePose, array: MicArray | None = None, fs: int = FS,
+def device_impulse_response(scene: Scene, pose: DevicePose, *, array: MicArray | None = None, fs: int = FS,
                             sim: Simulation = DEFAULT_SIMULATION, cache=None) -> np.ndarray:
     """Impulse responses (M, n) from the device's emitter to its microphones (the scene's array
     by default; channel 0 is the protocol's microphone 7 cm above the emitter)."""
     array = scene.mic_array if array is None else array
-    return impulse_responses(scene, pose.emitter, pose.microphones(array), fs, sim, cache, facing=pose.forward)
+    return impulse_responses(scene, pose.emitter, pose.microphones(array), fs, sim=sim, cache=cache, facing=pose.forward)
 
 
 def direct_amplitude(distance_m: float, gain: float = 1.0) -> float:

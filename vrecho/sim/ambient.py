@@ -88,7 +88,7 @@ def _rirs(room, sources: list[np.ndarray], mics: np.ndarray, fs: int, cache) -> 
 
 
 def simulate_walk_capture(room: Scene | Shoebox, sources: list[AmbientSource], poses: list[DevicePose],
-                          rng: np.random.Generator, array: MicArray | str = "headset4", fs: int = FS,
+                          rng: np.random.Generator, *, array: MicArray | str = "headset4", fs: int = FS,
                           segment_s: float = 2.0, snr_db: float = 30.0, self_noise_db: float = 60.0,
                           cache=None) -> SimulatedCapture:
     """Record ``sources`` at each of ``poses`` (see the module's docstring).
@@ -133,7 +133,7 @@ def simulate_walk_capture(room: Scene | Shoebox, sources: list[AmbientSource], p
     return SimulatedCapture(captures, images, list(sources), list(poses))
 
 
-def hear_scene(scene: Scene, rng: np.random.Generator, n_poses: int = 8, segment_s: float = 1.5,
+def hear_scene(scene: Scene, rng: np.random.Generator, *, n_poses: int = 8, segment_s: float = 1.5,
                array: MicArray | str = "headset4", fs: int = FS, cache=None) -> SimulatedCapture:
     """The scene's own sources heard along its walkthrough (its ``camera_path``, or
     :func:`vrecho.sim.scenes.walkthrough_path`): ``n_poses`` captures of ``segment_s`` each, the
@@ -147,7 +147,7 @@ def hear_scene(scene: Scene, rng: np.random.Generator, n_poses: int = 8, segment
     duration = n_poses * segment_s
     sources = [AmbientSource(np.asarray(s.position, float), ambient_sound(s.sound, duration, fs, rng) * 10 ** (s.gain_db / 20),
                              f"{s.sound}_{k}") for k, s in enumerate(scene.sources)]
-    return simulate_walk_capture(scene, sources, poses, rng, array, fs, segment_s, cache=cache)
+    return simulate_walk_capture(scene, sources, poses, rng, array=array, fs=fs, segment_s=segment_s, cache=cache)
 
 
 AMBIENT_KINDS = ("speech", "music", "hum", "protocol")
@@ -157,7 +157,7 @@ PROTOCOL_SOUNDS = ("clap", "voice", "whistle", "chirp", "white_noise", "pink_noi
 """The PROTOCOL.md sounds a random room's source may repeat."""
 
 
-def random_walk(rng: np.random.Generator, n_sources: int, rt60_s: float, n_poses: int = 8,
+def random_walk(rng: np.random.Generator, n_sources: int, rt60_s: float, *, n_poses: int = 8,
                 segment_s: float = 1.5) -> tuple[Shoebox, list[AmbientSource], list[DevicePose]]:
     """A random shoebox room 3.5-7 x 3-6 x 2.4-3 m of reverberation time ``rt60_s``, a walk of
     ``n_poses`` headset poses along an arc through it (head turned up to 46 degrees from the

@@ -23,7 +23,7 @@ from .render import World, render_view
 from .scenes import walkthrough_path
 
 
-def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, fs: int = FS, emitted=None,
+def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, *, fs: int = FS, emitted=None,
                        snr_db: float = 30.0, drift: float = 0.0, clip: float | None = None,
                        dropped: tuple[int, ...] = (), lead_s: float = 0.3,
                        pauses: dict[int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -76,7 +76,7 @@ def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, 
     return x.astype(np.float32), truth
 
 
-def simulate_capture(scene, folder, n_pulses: int = 20, fps: float = 4.0, camera=None, seed: int = 0,
+def simulate_capture(scene, folder, *, n_pulses: int = 20, fps: float = 4.0, camera=None, seed: int = 0,
                      audio_codec: str = "flac", snr_db: float = 30.0, video: tuple[int, int, float] | None = None,
                      progress: bool = False) -> dict:
     """A phone capture of a scene as a user brings it to ``vrecho capture``, made by the simulator:
@@ -109,12 +109,12 @@ def simulate_capture(scene, folder, n_pulses: int = 20, fps: float = 4.0, camera
     pic_t = np.arange(int(duration * fps)) / fps
     pos, fwd = scene.camera_path.at(walk(pic_t))
     world = World(scene)
-    views = [render_view(world, camera_pose(p, f), camera)
+    views = [render_view(world, camera_pose(p, f), camera=camera)
              for p, f in tqdm(list(zip(pos, fwd)), desc="render pictures", unit="picture", disable=not progress)]
     path = folder / ("capture.mkv" if audio_codec == "flac" else "capture.mp4")
     gray = [np.round(255 * v.gray).astype(np.uint8) for v in views]
     if video is None:
-        write_video(path, np.stack(gray), fps, x, FS, audio_codec)
+        write_video(path, np.stack(gray), fps, x, FS, audio_codec=audio_codec)
     else:
         
         width, height, rate = video
@@ -126,7 +126,7 @@ def simulate_capture(scene, folder, n_pulses: int = 20, fps: float = 4.0, camera
                 yield np.clip(big[min(int(i / rate * fps), len(big) - 1)] + noise, 0, 255).astype(np.uint8)
 
         write_video(path, tqdm(frames(), total=int(duration * rate), desc="encode video", unit="frame",
-                               disable=not progress), rate, x, FS, audio_codec)
+                               disable=not progress), rate, x, FS, audio_codec=audio_codec)
     names = [f"{k + 1:06d}.png" for k in range(len(views))]
     colmap.write_model(folder / "poses", colmap.pinhole(camera.intrinsics, camera.width, camera.height), names,
                        np.stack([v.pose for v in views]))

@@ -39,7 +39,7 @@ class Observation:
     ir: np.ndarray  # the simulated impulse response behind the frame
 
 
-def listen(scene: Scene, rng: np.random.Generator | None = None, progress: bool = True) -> list[Observation]:
+def listen(scene: Scene, rng: np.random.Generator | None = None, *, progress: bool = True) -> list[Observation]:
     """Simulate the probe at every pose of ``scene`` that faces a discontinuity."""
     rng = np.random.default_rng(0) if rng is None else rng
     sound = probe()

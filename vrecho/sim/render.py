@@ -199,7 +199,7 @@ def _reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
     return d - 2 * np.sum(d * n, axis=1, keepdims=True) * n
 
 
-def render_view(world: World | Scene, pose: np.ndarray, camera: Camera = Camera()) -> View:
+def render_view(world: World | Scene, pose: np.ndarray, *, camera: Camera = Camera()) -> View:
     """Render a grayscale image and a depth frame from a camera-to-world ``pose`` (4, 4)."""
     world = World(world) if isinstance(world, Scene) else world
     K = camera.intrinsics
@@ -216,7 +216,7 @@ def render_view(world: World | Scene, pose: np.ndarray, camera: Camera = Camera(
     return View(gray.reshape(shape).astype(np.float32), depth.reshape(shape).astype(np.float32), K, pose)
 
 
-def crop(world: World | Scene, pose: DevicePose, index: int | None = None, shape: tuple[int, int] = CROP_SHAPE,
+def crop(world: World | Scene, pose: DevicePose, index: int | None = None, *, shape: tuple[int, int] = CROP_SHAPE,
          margin: float = 0.15) -> np.ndarray:
     """The camera's grayscale crop around a discontinuity (the pose's target by default).
 

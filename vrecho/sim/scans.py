@@ -22,7 +22,7 @@ from .scenes import walkthrough_path
 from .scoring import SceneTruth
 
 
-def walkthrough(scene: Scene, n_frames: int = 60, camera: Camera = Camera(), progress: bool = False) -> list[View]:
+def walkthrough(scene: Scene, *, n_frames: int = 60, camera: Camera = Camera(), progress: bool = False) -> list[View]:
     """Frames rendered along the scene's camera path, evenly spaced in time."""
     if scene.camera_path is None:
         raise VrechoError(f"scene {scene.name!r}: no camera_path to walk")
@@ -30,20 +30,20 @@ def walkthrough(scene: Scene, n_frames: int = 60, camera: Camera = Camera(), pro
         raise VrechoError(f"n_frames: expected at least 2, got {n_frames}")
     world = World(scene)
     positions, forwards = scene.camera_path.sample(n_frames)
-    return [render_view(world, camera_pose(p, f), camera)
+    return [render_view(world, camera_pose(p, f), camera=camera)
             for p, f in tqdm(list(zip(positions, forwards)), desc="render walkthrough", unit="frame",
                              disable=not progress)]
 
 
-def scan_scene(scene: Scene, n_frames: int = 60, camera: Camera = Camera(), voxel_m: float = 0.03,
+def scan_scene(scene: Scene, *, n_frames: int = 60, camera: Camera = Camera(), voxel_m: float = 0.03,
                progress: bool = False) -> Scan:
     """The simulated phone scan of a scene: its walkthrough (the scene's camera path, or
     :func:`~vrecho.sim.scenes.walkthrough_path`) fused into a mesh. No echoes yet: the
     reconstruction asks :func:`hear_echoes`'s ``hear`` for them where frames look at a hole."""
     if scene.camera_path is None:
         scene = dataclasses.replace(scene, camera_path=walkthrough_path(scene))
-    views = walkthrough(scene, n_frames, camera, progress)
-    return Scan(views, fuse(views, voxel_m, progress=progress))
+    views = walkthrough(scene, n_frames=n_frames, camera=camera, progress=progress)
+    return Scan(views, fuse(views, voxel_m=voxel_m, progress=progress))
 
 
 def simulate_echoes(scene: Scene, views: list[View], frames, *, seed: int = 0, progress: bool = False) -> Echoes:
@@ -71,5 +71,5 @@ def simulate_scene(scene: Scene, *, n_frames: int = 60, seed: int = 0,
     """What the ``vrecho`` commands run on for a scene (the simulator's entry point, group
     ``vrecho.simulators``): its scan (:func:`scan_scene` with ``n_frames`` walkthrough frames),
     what the device hears at a frame (:func:`hear_echoes`) and the truth (:class:`SceneTruth`)."""
-    return scan_scene(scene, n_frames, progress=progress), hear_echoes(scene, seed=seed, progress=progress), \
+    return scan_scene(scene, n_frames=n_frames, progress=progress), hear_echoes(scene, seed=seed, progress=progress), \
         SceneTruth(scene)

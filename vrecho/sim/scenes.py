@@ -24,7 +24,7 @@ FLOOR_MATERIALS = ("carpet_cotton", "carpet_hairy", "carpet_6mm_closed_cell_foam
 CEILING_MATERIALS = ("plasterboard", "ceiling_plasterboard", "rough_concrete", "wooden_lining")
 
 
-def face(scene: Scene, index: int, depth_m: float, offset_u_m: float = 0.0, offset_z_m: float = 0.0,
+def face(scene: Scene, index: int, depth_m: float, *, offset_u_m: float = 0.0, offset_z_m: float = 0.0,
          yaw_deg: float = 0.0, pitch_deg: float = 0.0) -> DevicePose:
     """A device pose facing discontinuity ``index`` from ``depth_m`` metres.
 
@@ -64,7 +64,7 @@ def closed_absorption(kind: str, rng: np.random.Generator) -> tuple[float, ...]:
     return tuple(np.round(np.array(MIRROR) * rng.uniform(0.8, 1.2, len(BANDS_HZ)), 4))
 
 
-def random_scene(rng: np.random.Generator, name: str = "scene", n_poses: int = 8, n_sources: int = 2,
+def random_scene(rng: np.random.Generator, name: str = "scene", *, n_poses: int = 8, n_sources: int = 2,
                  n_discontinuities: tuple[int, int] = (1, 3)) -> Scene:
     """Draw a scene as PROTOCOL.md allows.
 
@@ -92,11 +92,11 @@ def _try_random_scene(rng, name, n_poses, n_sources, n_discontinuities) -> Scene
     fp = np.round(np.array(fp), 3)
     scat = float(np.round(rng.uniform(0.05, 0.3), 3))
     if rng.random() < 0.5:
-        walls = [Material.from_database(str(rng.choice(WALL_MATERIALS)), scat)] * len(fp)
+        walls = [Material.from_database(str(rng.choice(WALL_MATERIALS)), scattering=scat)] * len(fp)
     else:
-        walls = [Material.from_database(str(rng.choice(WALL_MATERIALS)), scat) for _ in fp]
-    room = Room(fp, round(height, 3), walls, Material.from_database(str(rng.choice(FLOOR_MATERIALS)), scat),
-                Material.from_database(str(rng.choice(CEILING_MATERIALS)), scat))
+        walls = [Material.from_database(str(rng.choice(WALL_MATERIALS)), scattering=scat) for _ in fp]
+    room = Room(fp, round(height, 3), walls, Material.from_database(str(rng.choice(FLOOR_MATERIALS)), scattering=scat),
+                Material.from_database(str(rng.choice(CEILING_MATERIALS)), scattering=scat))
     # Devices differ: from a cardioid to nearly omnidirectional loudspeakers.
     scene = Scene(name, room, emitter_p=float(np.round(rng.uniform(0.5, 0.9), 3)))
 
@@ -172,7 +172,7 @@ def _random_pose(scene: Scene, index: int, rng: np.random.Generator) -> DevicePo
     return None
 
 
-def walkthrough_path(scene: Scene, distance_m: float = 1.6, height_m: float = 1.5, duration_s: float = 40.0,
+def walkthrough_path(scene: Scene, *, distance_m: float = 1.6, height_m: float = 1.5, duration_s: float = 40.0,
                      reach_m: tuple[float, float] = (0.8, 1.9), clear_m: float = 0.35) -> CameraPath:
     """A camera path around a room that looks at every wall, and squarely at each discontinuity.
 

@@ -29,7 +29,7 @@ from .ambient import SimulatedCapture, hear_scene
 from .render import World
 
 
-def match_truth(scene: Scene, hole: Hole, max_offset_m: float = 0.15) -> int | None:
+def match_truth(scene: Scene, hole: Hole, *, max_offset_m: float = 0.15) -> int | None:
     """The scene's discontinuity a hole belongs to (largest overlap on the same wall), or None."""
     best, best_area = None, 0.0
     polygon = hole.polygon()
@@ -116,13 +116,13 @@ def _area(mesh) -> float:
     return float(np.nansum(0.5 * np.linalg.norm(np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]), axis=1)))
 
 
-def capped_density(mesh, density_per_m2: float, max_points: int = 3_000_000) -> float:
+def capped_density(mesh, density_per_m2: float, *, max_points: int = 3_000_000) -> float:
     """``density_per_m2``, lowered where the mesh is so large (a generic hole filler's triangles
     can span the outdoors) that more than ``max_points`` would be drawn."""
     return min(density_per_m2, max_points / max(_area(mesh), 1e-9))
 
 
-def sample_surface(mesh, density_per_m2: float, seed: int = 0) -> np.ndarray:
+def sample_surface(mesh, density_per_m2: float, *, seed: int = 0) -> np.ndarray:
     """Points spread uniformly over a mesh's area, ``density_per_m2`` of them per square metre."""
     v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
     if not len(t):
@@ -147,10 +147,10 @@ def _sample_polygons(polygons: list[np.ndarray], n: int, seed: int = 0) -> np.nd
         verts.append(p)
     mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.vstack(verts)),
                                      o3d.utility.Vector3iVector(np.vstack(tris).astype(np.int32)))
-    return sample_surface(mesh, n / _area(mesh), seed)
+    return sample_surface(mesh, n / _area(mesh), seed=seed)
 
 
-def added_surface(initial, mesh, near: tuple[np.ndarray, np.ndarray] | None = None,
+def added_surface(initial, mesh, *, near: tuple[np.ndarray, np.ndarray] | None = None,
                   density_per_m2: float = 10_000.0) -> np.ndarray:
     """Points (N, 3) on the parts of ``mesh`` more than 2 cm from ``initial`` (within the box
     ``near`` = (lo, hi) when given)."""
@@ -169,7 +169,7 @@ def added_surface(initial, mesh, near: tuple[np.ndarray, np.ndarray] | None = No
     return pts[_distance(rc, pts) > ADDED_M]
 
 
-def phantom_area_m2(scene: Scene, mesh, world: World | None = None, density_per_m2: float = 400.0) -> float:
+def phantom_area_m2(scene: Scene, mesh, *, world: World | None = None, density_per_m2: float = 400.0) -> float:
     """Area of a mesh behind the room's walls and farther than 15 cm from any real surface."""
     world = World(scene) if world is None else world
     density_per_m2 = capped_density(mesh, density_per_m2)
@@ -194,13 +194,13 @@ def _finite(mesh):
     return out
 
 
-def score(scene: Scene, initial, mesh, world: World | None = None, n_chamfer: int = 40_000) -> dict:
+def score(scene: Scene, initial, mesh, *, world: World | None = None, n_chamfer: int = 40_000) -> dict:
     """The metrics of the module's docstring for ``mesh``, a repair of the scan ``initial``."""
     world = World(scene) if world is None else world
     initial, mesh = _finite(initial), _finite(mesh)
     fp = scene.room.footprint
     box = (np.r_[fp.min(axis=0) - 1.0, -1.0], np.r_[fp.max(axis=0) + 1.0, scene.room.height_m + 1.0])
-    added = added_surface(initial, mesh, box)
+    added = added_surface(initial, mesh, near=box)
     ious, depth_errors, open_cover = [], [], []
     for k, d in enumerate(scene.discontinuities):
         origin, u, normal = scene.room.wall_frame(d.wall)
@@ -229,8 +229,8 @@ def score(scene: Scene, initial, mesh, world: World | None = None, n_chamfer: in
     truth_pts = _sample_polygons(shell, n_chamfer, seed=2)
     mesh_pts = sample_surface(mesh, n_chamfer / max(mesh.get_surface_area(), 1e-9), seed=3)
     chamfer = 0.5 * (_distance(world._rc, mesh_pts).mean() + _distance(_rc(mesh), truth_pts).mean())
-    phantom0 = phantom_area_m2(scene, initial, world)
-    phantom = phantom_area_m2(scene, mesh, world)
+    phantom0 = phantom_area_m2(scene, initial, world=world)
+    phantom = phantom_area_m2(scene, mesh, world=world)
     return {
         "closed_iou": float(np.mean(ious)) if ious else None,
         "closed_ious": [float(x) for x in ious],
@@ -261,4 +261,4 @@ class SceneTruth:
 
     def captures(self, rng, *, n_poses: int = 8) -> SimulatedCapture:
         """The scene's sources heard by the headset along its walkthrough (:func:`~.ambient.hear_scene`)."""
-        return hear_scene(self.scene, rng, n_poses)
+        return hear_scene(self.scene, rng, n_poses=n_poses)

@@ -48,7 +48,7 @@ class Walk:
 
 def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: float, probe: np.ndarray,
                   period_s: float, fs: int, rng: np.random.Generator, plane: tuple[np.ndarray, np.ndarray],
-                  stop_m: float = 0.15, snr_db: float | None = None, lead_s: float = 0.3) -> Walk:
+                  *, stop_m: float = 0.15, snr_db: float | None = None, lead_s: float = 0.3) -> Walk:
     """The microphone signal of a walk from ``start`` toward ``goal`` (emitter positions, metres)
     at ``speed_mps``, stopping ``stop_m`` before the target's plane (``plane``: a point on it
     and its unit normal). ``lead_s``: standing still at the start first."""
@@ -83,7 +83,7 @@ def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: 
         yaw = np.radians(3.0) * np.sin(2 * np.pi * 0.9 * t + sway_phase)
         c, sn = np.cos(yaw), np.sin(yaw)
         fwd = np.array([c * heading[0] - sn * heading[1], sn * heading[0] + c * heading[1], 0.0])
-        room = build_room(scene, fs, WALK_SIMULATION)  # pyroomacoustics keeps per-source state
+        room = build_room(scene, fs, sim=WALK_SIMULATION)  # pyroomacoustics keeps per-source state
         room.add_source(pos, directivity=emitter_directivity(fwd, scene.emitter_p))
         room.add_microphone(pos + [0.0, 0.0, MIC_ABOVE_EMITTER_M])
         room.compute_rir()
@@ -102,7 +102,7 @@ def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: 
     return Walk((x * gain)[:n_pulses * period + period], fs, times, dists, latency / fs, where, facing)
 
 
-def headset_frames(world, walk: Walk, every: int = 6, latency_s: float = 0.05) -> list:
+def headset_frames(world, walk: Walk, *, every: int = 6, latency_s: float = 0.05) -> list:
     """What the headset's camera (:data:`vrecho.sim.walks.HEADSET_CAMERA`, at the microphone,
     facing the wearer's way) shows along a walk: a frame at every ``every``-th pulse, arriving
     ``latency_s`` after it. ``world``: the walk's scene as a :class:`vrecho.sim.render.World`.
@@ -111,7 +111,7 @@ def headset_frames(world, walk: Walk, every: int = 6, latency_s: float = 0.05) -
     frames = []
     for k in range(0, len(walk.pulse_times_s), every):
         pose = camera_pose(walk.position_m[k] + [0.0, 0.0, MIC_ABOVE_EMITTER_M], walk.forward[k])
-        view = render_view(world, pose, HEADSET_CAMERA)
+        view = render_view(world, pose, camera=HEADSET_CAMERA)
         frames.append((walk.pulse_times_s[k] + latency_s, view.gray, view.depth, view.intrinsics))
     return frames
 
