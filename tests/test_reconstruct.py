@@ -101,7 +101,7 @@ def test_holes_in_the_walls_are_the_glass_opening_and_mirror(scan):
 
 def test_geometry_beyond_the_walls_is_found(scan):
     from vrecho.reconstruct import beyond_walls, wall_planes
-    from vrecho.scene import distance_to_polygon, point_in_polygon
+    from vrecho.geometry import distance_to_polygon, point_in_polygon
 
     scene, vertices, views = scan
     beyond = beyond_walls(vertices, wall_planes(vertices, np.array([v.pose[:3, 3] for v in views])))

@@ -13,7 +13,7 @@ from scipy import ndimage
 from scipy.spatial import ConvexHull
 
 from ..camera import View, project
-from ..scene import signed_area
+from ..geometry import signed_area
 
 
 @dataclass

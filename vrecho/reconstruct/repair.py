@@ -11,7 +11,7 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from ..errors import VrechoError
-from ..scene import distance_to_polygon, point_in_polygon
+from ..geometry import distance_to_polygon, point_in_polygon
 from .decide import Decision
 from .discontinuities import Hole, seen_through
 

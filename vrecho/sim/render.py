@@ -18,7 +18,8 @@ import numpy as np
 
 from ..camera import CROP_SHAPE, DEPTH_MAX_M, Camera, View, crop_grid
 from ..errors import VrechoError
-from ..scene import DevicePose, Scene, triangulate_polygon
+from ..geometry import triangulate_polygon
+from ..scene import DevicePose, Scene
 
 
 GLASS_TRANSMIT = 0.85

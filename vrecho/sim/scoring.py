@@ -24,7 +24,8 @@ import numpy as np
 
 from ..reconstruct.decide import Decision
 from ..reconstruct.discontinuities import Hole
-from ..scene import Scene, distance_to_polygon, point_in_polygon, triangulate_polygon
+from ..geometry import distance_to_polygon, point_in_polygon, triangulate_polygon
+from ..scene import Scene
 from .ambient import SimulatedCapture, hear_scene
 from .render import World
 
