@@ -6,13 +6,13 @@ Each room (``random_scene``'s rooms and materials, seed ``--seed``) gets a glass
 and a door-sized opening on three of its walls, each reaching from near the floor to above head
 height; a fourth wall is plain. A wearer (head 1.5 to 1.75 m high) walks toward each, at 0.5 to
 2 m/s, from up to 3.5 m away, within 15 degrees of square, bobbing and swaying
-(``vrecho.walks``), with pink background noise 20 to 40 dB below the direct sound; closed
+(``vrecho.sim.walks``), with pink background noise 20 to 40 dB below the direct sound; closed
 surfaces are walked to 15 cm, openings to their plane. Half the rooms run at 44.1 kHz, half at
 48 kHz, in 10 ms blocks. Every walk is run twice: clean, and disturbed (the signal clipped at
 half the direct sound's peak, a 20 ms dropout of zeros and a 10 ms block of NaNs every second,
 and blocks of random sizes from 1 to 2048 samples).
 
-The headset's camera (``vrecho.walks.headset_frames``: 100 degrees, rendered with its depth
+The headset's camera (``vrecho.sim.walks.headset_frames``: 100 degrees, rendered with its depth
 frame from the wearer's pose) shows the monitor a frame every 6 pulses (0.24 s), 50 ms after
 the pulse it was taken at (``BoundaryMonitor.see``).
 

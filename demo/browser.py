@@ -20,7 +20,13 @@ FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader
 
 
 def chromium() -> str | None:
-    """The path of a Chromium (or Chrome) on this machine, or None."""
+    """The path of a Chromium (or Chrome) on this machine, or None.
+
+    Returns
+    -------
+    str or None
+        The first of :data:`CHROMIUM_NAMES` found on ``PATH``.
+    """
     return next((p for p in map(shutil.which, CHROMIUM_NAMES) if p), None)
 
 
@@ -30,6 +36,30 @@ def screenshot(page: str | Path, png: str | Path, *, size: tuple[int, int] = (12
 
     ``budget_ms``: Chromium's virtual time for the page to load and draw before the picture.
     Raises :class:`VrechoError` when no Chromium is installed or it fails.
+
+    Parameters
+    ----------
+    page : str or path
+        The HTML file.
+    png : str or path
+        The picture to write.
+    size : tuple of int
+        The window's width and height in pixels (default 1280 x 800).
+    budget_ms : int
+        Virtual time in milliseconds (default 8000).
+    timeout_s : float
+        Wall-clock limit in seconds for Chromium (default 120).
+
+    Returns
+    -------
+    pathlib.Path
+        ``png``, resolved.
+
+    Raises
+    ------
+    VrechoError
+        When no Chromium is installed, ``page`` is not a file, or Chromium fails or runs past
+        ``timeout_s``.
     """
     exe = chromium()
     if exe is None:
@@ -51,7 +81,18 @@ def screenshot(page: str | Path, png: str | Path, *, size: tuple[int, int] = (12
 
 
 def open_in_browser(page: str | Path) -> bool:
-    """Open ``page`` in the user's browser when there is a display; False when none could be."""
+    """Open ``page`` in the user's browser when there is a display; False when none could be.
+
+    Parameters
+    ----------
+    page : str or path
+        The HTML file.
+
+    Returns
+    -------
+    bool
+        Whether a browser was opened.
+    """
     if os.name == "posix" and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) \
             and not shutil.which("open"):  # no display (macOS has `open`)
         return False

@@ -59,7 +59,24 @@ class BoundaryWalk:
     """The headset call on a walk toward a discontinuity: per 10 ms block the device's position
     (K, 3), the true distance to the surface's plane and the alert level; the true distance when
     caution and stop were first raised (None: never); what the stop named the surface (the
-    headset camera's answer, :meth:`~vrecho.headset.BoundaryMonitor.see`)."""
+    headset camera's answer, :meth:`~vrecho.headset.BoundaryMonitor.see`).
+
+    Attributes
+    ----------
+    surface : int
+        The discontinuity's index in the scene.
+    kind : {"glass", "mirror", "open"}
+    positions : numpy.ndarray, shape (K, 3)
+        The device's position in metres, per block.
+    distance_m : numpy.ndarray, shape (K,)
+        The true distance to the surface's plane in metres, per block.
+    levels : list of {"clear", "caution", "stop"}
+        The alert, per block.
+    caution_at_m, stop_at_m : float or None
+        The true distance in metres when caution and stop were first raised.
+    named : str, optional
+        What the stop named the surface.
+    """
 
     surface: int
     kind: str
@@ -82,7 +99,23 @@ class BoundaryWalk:
 @dataclass
 class DemoRun:
     """A demo's results: ``rows`` the decisions against the truth (what, vrecho says, truth,
-    right), ``files`` what was written, ``seconds`` each step's time."""
+    right), ``files`` what was written, ``seconds`` each step's time.
+
+    Attributes
+    ----------
+    scene : Scene
+    reconstruction : Reconstruction
+        The scan and its repair.
+    placed : list
+        The sources placed (:func:`localization.place_sources`).
+    walks : list of BoundaryWalk
+    rows : list of tuple
+        (what, vrecho says, truth, right): ``right`` True, False, or None where it is an account,
+        not a decision.
+    files : dict of str to pathlib.Path
+    seconds : dict of str to float
+        Each step's time in seconds, and ``total``.
+    """
 
     scene: Scene
     reconstruction: object  # vrecho.reconstruct.Reconstruction
@@ -93,7 +126,12 @@ class DemoRun:
     seconds: dict[str, float] = field(default_factory=dict)
 
     def table(self) -> str:
-        """The decisions as a Markdown table."""
+        """The decisions as a Markdown table (a row per entry of ``rows``).
+
+        Returns
+        -------
+        str
+        """
         lines = ["| decision | vrecho says | truth | right |", "|:---|:---|:---|:---:|"]
         mark = {True: "yes", False: "**no**", None: "-"}
         lines += [f"| {a} | {b} | {c} | {mark[d]} |" for a, b, c, d in self.rows]
@@ -179,7 +217,24 @@ def _walk_rows(scene: Scene, walks: list[BoundaryWalk]) -> list:
 def boundary_walks(scene: Scene, rng: np.random.Generator, *, progress: bool = False) -> list[BoundaryWalk]:
     """The headset call on a walk toward each discontinuity of ``scene`` (1.6 m high, straight
     at its centre, at 1 m/s, from up to 2.5 m away), in 10 ms blocks at 48 kHz, the headset's
-    camera showing it a frame every 0.24 s (:func:`vrecho.sim.walks.headset_frames`)."""
+    camera showing it a frame every 0.24 s (:func:`vrecho.sim.walks.headset_frames`).
+
+    A walk starts as far as 2.5 m from the surface as the room allows (0.3 m from its walls),
+    but no nearer than 1 m; a surface with no such room in front of it gets no walk.
+
+    Parameters
+    ----------
+    scene : Scene
+    rng : numpy.random.Generator
+        Draws the walks' noise.
+    progress : bool
+        Show a progress bar (default False).
+
+    Returns
+    -------
+    list of BoundaryWalk
+        One per discontinuity walked toward, in the scene's order.
+    """
     fs = 48000
     world = World(scene)
     out = []
@@ -216,7 +271,20 @@ def boundary_walks(scene: Scene, rng: np.random.Generator, *, progress: bool = F
 
 
 def boundary_figure(walks: list[BoundaryWalk], path: Path) -> Path:
-    """Each walk's true distance against time, coloured by the alert, with the thresholds."""
+    """Each walk's true distance against time, coloured by the alert, with the thresholds.
+
+    Parameters
+    ----------
+    walks : list of BoundaryWalk
+        At least one.
+    path : pathlib.Path
+        The PNG to write.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     import matplotlib  # heavy (0.8 s to import): only figures need it
 
     matplotlib.use("Agg")
@@ -276,7 +344,38 @@ def run(out: str | Path = "vrecho-out", *, scene: str | Path | Scene | None = No
     ``html`` (default ``out/walkthrough.html``); open it in the browser when ``browser`` and
     a display is there; with ``serve``, also show it on a live meshcat server until Ctrl-C.
     ``screenshot``: write ``out/walkthrough.png`` where Chromium is installed. Prints each step
-    and, at the end, the table of decisions (also ``out/summary.md``)."""
+    and, at the end, the table of decisions (also ``out/summary.md``).
+
+    Parameters
+    ----------
+    out : str or path
+        Output folder (default ``vrecho-out``); created if missing.
+    scene : str, path or Scene, optional
+        The scene (default: the built-in living room).
+    html : str or path, optional
+        The walkthrough page, a .html file (default ``out/walkthrough.html``).
+    browser : bool
+        Open the page in a browser.
+    screenshot : bool
+        Write ``out/walkthrough.png`` where Chromium is installed.
+    seed : int
+        Seed of the simulated recordings.
+    serve : bool
+        Also serve the walkthrough live until Ctrl-C.
+    progress : bool
+        Progress bars and the step lines (the table is printed either way).
+
+    Returns
+    -------
+    DemoRun
+        The decisions against the truth, the files written and each step's time.
+
+    Raises
+    ------
+    VrechoError
+        For a bad scene file, a scene without glass, mirror or opening, an ``html`` path that is
+        not a .html file, or a folder that cannot be written.
+    """
     from vrecho.classifier import load_classifier  # torch-bound (1.7 s): `vrecho --help` needs none of it
 
     if scene is None:

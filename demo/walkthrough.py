@@ -40,7 +40,15 @@ ROOT = "/vrecho"  # everything drawn lies under it
 
 @dataclass
 class Marker:
-    """A labelled point: ``position`` (3,) metres."""
+    """A labelled point: ``position`` (3,) metres.
+
+    Attributes
+    ----------
+    position : numpy.ndarray, shape (3,)
+        In metres, in the scene's frame (z up).
+    label : str
+        The text shown beside it.
+    """
 
     position: np.ndarray
     label: str
@@ -48,7 +56,17 @@ class Marker:
 
 @dataclass
 class Track:
-    """A walk's positions (N, 3) and the alert level at each (N,), and its name in the scene tree."""
+    """A walk's positions (N, 3) and the alert level at each (N,), and its name in the scene tree.
+
+    Attributes
+    ----------
+    positions : numpy.ndarray, shape (N, 3)
+        In metres.
+    levels : list of {"clear", "caution", "stop"}
+        N alert levels.
+    label : str
+        Its name in the scene tree.
+    """
 
     positions: np.ndarray
     levels: list[str]
@@ -59,7 +77,29 @@ class Track:
 class Walkthrough:
     """What the page shows. Meshes are (vertices (N, 3), faces (F, 3), colours (N, 3) or None);
     ``surfaces`` are :class:`usd_export.LabeledSurface`; ``camera`` the path's positions (N, 3)
-    and viewing directions (N, 3)."""
+    and viewing directions (N, 3).
+
+    Attributes
+    ----------
+    initial, repaired : tuple
+        The scan's mesh and the repaired one: vertices (N, 3) in metres, faces (F, 3) int,
+        colours (N, 3) in [0, 1] or None.
+    surfaces : list of usd_export.LabeledSurface
+        Each discontinuity as vrecho decided it.
+    camera : tuple of numpy.ndarray
+        The path's positions (N, 3) in metres and viewing directions (N, 3).
+    heard : list of Marker
+        The sources placed from what was heard.
+    truth : list of Marker
+        The scene's own sources, where known.
+    tracks : list of Track
+        The headset's walks.
+    title : str
+        The page's title (default ``vrecho``).
+    room : tuple of numpy.ndarray, optional
+        The room's box (lo, hi), (3,) each in metres, to frame; default: the path's, 1.5 m
+        wider each way.
+    """
 
     initial: tuple
     repaired: tuple
@@ -163,7 +203,17 @@ def _surface(vis, s) -> None:
 
 
 def build(vis, w: Walkthrough, *, frames_per_pose: int = 6) -> None:
-    """Draw ``w`` into the meshcat visualizer ``vis`` (its scene is replaced)."""
+    """Draw ``w`` into the meshcat visualizer ``vis`` (its scene is replaced).
+
+    Parameters
+    ----------
+    vis : meshcat.Visualizer
+        Its scene, animation and camera are replaced.
+    w : Walkthrough
+    frames_per_pose : int
+        Animation frames (at 30 per second) between two of the camera path's positions
+        (default 6).
+    """
     import meshcat.animation as anim  # heavy (0.6 s to import): only the walkthrough page needs it
 
     vis.delete()
@@ -221,7 +271,17 @@ Animations: replay the walk.</div>"""
 
 def static_page(w: Walkthrough) -> str:
     """The walkthrough as one self-contained HTML page (meshcat's viewer and the scene inlined,
-    a legend; no server, no network)."""
+    a legend; no server, no network).
+
+    Parameters
+    ----------
+    w : Walkthrough
+
+    Returns
+    -------
+    str
+        The page's HTML, titled ``w.title``.
+    """
     with _server() as vis:
         build(vis, w)
         page = vis.static_html()
@@ -244,7 +304,14 @@ def _server():
 
 def serve(w: Walkthrough, *, wait=None) -> None:
     """Show ``w`` on a live meshcat server (its address printed) until interrupted (Ctrl-C) or,
-    with ``wait``, until ``wait()`` returns."""
+    with ``wait``, until ``wait()`` returns.
+
+    Parameters
+    ----------
+    w : Walkthrough
+    wait : callable, optional
+        Called with no argument; the server stops when it returns.
+    """
     with _server() as vis:
         build(vis, w)
         print(f"the walkthrough is served at {vis.url()} (Ctrl-C to stop)", flush=True)

@@ -33,12 +33,38 @@ def place_sources(captures, n_sources: int | None = None, *, bounds=None, method
                   progress: bool = False) -> list[PlacedSource]:
     """The sources heard across ``captures``: where each is and what it plays.
 
-    Positions from :func:`locate` (``n_sources`` None: the count is estimated); each capture is
-    separated with ``method`` (``informed``: steered by those positions) and each source's
-    stretches are joined in capture order with short crossfades into one signal at the
-    captures' rate (stretches that were not recorded are not invented: the track is the
-    captures' stretches back to back). ``confidence``: the source's share of the strongest
-    source's map peak; ``uncertainty_m``: the position's standard error.
+    Positions from :func:`locate`; each capture is separated with ``method`` and each source's
+    stretches are joined in capture order with short crossfades (``CROSSFADE_S``, 50 ms) into
+    one signal at the captures' rate (stretches that were not recorded are not invented: the
+    track is the captures' stretches back to back). Blind methods' outputs are matched to the
+    positions by their coherence with a delay-and-sum beam toward each.
+
+    Parameters
+    ----------
+    captures : Capture or iterable of Capture
+        The walk's captures, at one sample rate, each with at least 2 microphones.
+    n_sources : int, optional
+        How many sources (None: the count is estimated).
+    bounds : tuple of two array_like [shape=(3,)], optional
+        The search box's (low corner, high corner) in metres (:func:`locate`).
+    method : str
+        A multichannel method of :func:`separate`: "informed" (the default: steered by the
+        positions), "auxiva", "ilrma" or "fastmnmf".
+    progress : bool
+        Show a progress bar over the captures (default False).
+
+    Returns
+    -------
+    list of PlacedSource
+        One per located source, named ``source_<i>``, its signal float32 at the captures' rate;
+        ``confidence``: the source's share of the strongest source's map peak, in [0, 1];
+        ``uncertainty_m``: the position's standard error in metres (None where unknown).
+
+    Raises
+    ------
+    VrechoError
+        For bad captures, a method that is not multichannel (checked before the work), or as
+        :func:`locate` and :func:`separate` do.
     """
     captures = check_captures(captures)
     multichannel = [name for name, sep in SEPARATORS.items() if sep.multichannel]

@@ -26,10 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vrecho.device import MIC_ARRAYS, DevicePose, MicArray
 from vrecho.errors import VrechoError
-from vrecho.scene import MIC_ARRAYS, DevicePose, MicArray
 from vrecho.signals import check_fs
-
 
 FS = 16_000
 """Localization's sample rate in Hz (speech and music carry little above 8 kHz)."""
@@ -40,10 +39,40 @@ SILENT_RMS = 1e-7
 
 @dataclass
 class Capture:
-    """``audio`` (M, N) float at ``fs`` Hz from microphones at ``mics`` (M, 3) world positions;
-    ``start_s`` when the stretch begins in the walk. Checked on construction: one
-    :class:`VrechoError` says what is wrong (channels of different lengths may be passed as a
-    list of 1-D arrays and are refused)."""
+    """One stretch of multichannel recording at one device pose.
+
+    Checked on construction: one :class:`VrechoError` says what is wrong (channels of different
+    lengths may be passed as a list of 1-D arrays and are refused).
+
+    Parameters
+    ----------
+    audio : numpy.ndarray [shape=(M, N)] or list of M 1-D arrays
+        The samples, one row per microphone; kept as float64. At least 0.25 s, finite, and no
+        channel silent (rms under 1e-7).
+    fs : int
+        Sample rate in Hz, a whole number of at least 8000 (:data:`FS`, 16 kHz, is
+        localization's own).
+    mics : numpy.ndarray [shape=(M, 3)]
+        The microphones' world positions in metres (vrecho's frame, Z up), one per channel,
+        finite and at least 1 mm apart; kept as float64.
+    start_s : float
+        When the stretch begins in the walk, in seconds (default 0).
+
+    Raises
+    ------
+    VrechoError
+        For any of the above not met, or ``mics`` None (unknown geometry).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from localization import Capture
+    >>> mics = [[0, 0, 1.5], [0.1, 0, 1.5], [0, 0.1, 1.5], [0, 0, 1.6]]
+    >>> audio = 0.01 * np.random.default_rng(0).standard_normal((4, 16000))
+    >>> c = Capture(audio, 16000, mics)
+    >>> c.n_mics, c.center.round(3)
+    (4, array([0.025, 0.025, 1.525]))
+    """
 
     audio: np.ndarray
     fs: int
@@ -80,15 +109,42 @@ class Capture:
 
     @property
     def n_mics(self) -> int:
+        """The number of microphones, M."""
         return len(self.mics)
 
     @property
     def center(self) -> np.ndarray:
+        """The array's centre (3,) in metres: the mean of the microphones' positions."""
         return self.mics.mean(axis=0)
 
     @classmethod
     def at_pose(cls, audio, fs: int, pose: DevicePose, array: MicArray | str = "headset4", *, start_s: float = 0.0):
-        """A capture from a known device pose and array (by name or :class:`MicArray`)."""
+        """A capture from a known device pose and array.
+
+        Parameters
+        ----------
+        audio : numpy.ndarray [shape=(M, N)]
+            The samples, one row per microphone of ``array``.
+        fs : int
+            Sample rate in Hz.
+        pose : vrecho.scene.DevicePose
+            The device's pose in the world.
+        array : str or vrecho.scene.MicArray
+            The array, by name in :data:`vrecho.scene.MIC_ARRAYS` (default ``"headset4"``) or
+            given.
+        start_s : float
+            When the stretch begins in the walk, in seconds.
+
+        Returns
+        -------
+        Capture
+            With the microphones at their world positions for ``pose``.
+
+        Raises
+        ------
+        VrechoError
+            For an unknown array name, or as :class:`Capture` does.
+        """
         if isinstance(array, str):
             if array not in MIC_ARRAYS:
                 raise VrechoError(f"array: expected one of {tuple(MIC_ARRAYS)}, got {array!r}")

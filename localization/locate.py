@@ -44,9 +44,20 @@ PRA_METHODS: tuple[str, ...] = ("MUSIC", "NormMUSIC", "SRP", "CSSM", "WAVES", "T
 
 @dataclass
 class Located:
-    """``positions`` (K, 3); ``uncertainty_m`` (K,) standard error of each position (NaN where
-    fewer than three captures saw it); ``strength`` (K,) each source's share of the map's peak
-    power (the first is 1); ``directions`` (captures, K, 3) unit vectors from each capture."""
+    """What :func:`locate` found: K sources.
+
+    Parameters
+    ----------
+    positions : numpy.ndarray [shape=(K, 3)]
+        World positions in metres.
+    uncertainty_m : numpy.ndarray [shape=(K,)]
+        The standard error of each position in metres (NaN where fewer than three captures saw
+        it).
+    strength : numpy.ndarray [shape=(K,)]
+        Each source's share of the map's peak power (the first is 1).
+    directions : numpy.ndarray [shape=(captures, K, 3)]
+        Unit vectors from each capture's array centre to each position.
+    """
 
     positions: np.ndarray
     uncertainty_m: np.ndarray
@@ -55,6 +66,23 @@ class Located:
 
 
 def check_captures(captures) -> list[Capture]:
+    """The captures as a list, checked for direction finding.
+
+    Parameters
+    ----------
+    captures : Capture or iterable of Capture
+        One capture or several.
+
+    Returns
+    -------
+    list of Capture
+
+    Raises
+    ------
+    VrechoError
+        For no captures, an item that is not a :class:`Capture`, a capture with fewer than 2
+        microphones, or captures at different sample rates.
+    """
     if isinstance(captures, Capture):
         captures = [captures]
     captures = list(captures)
@@ -72,7 +100,20 @@ def check_captures(captures) -> list[Capture]:
 
 
 def stft(audio: np.ndarray, *, nfft: int = NFFT) -> np.ndarray:
-    """(M, F, T) short-time spectra, Hann window, hop nfft / 2."""
+    """Short-time spectra, Hann window, hop nfft / 2.
+
+    Parameters
+    ----------
+    audio : numpy.ndarray [shape=(M, N)]
+        The samples, one row per microphone.
+    nfft : int
+        Frame length in samples (default :data:`NFFT`, 512).
+
+    Returns
+    -------
+    numpy.ndarray [shape=(M, nfft // 2 + 1, T), dtype=complex128]
+        One frame per hop that fits wholly in the samples.
+    """
     hop = nfft // 2
     n = audio.shape[1]
     n_frames = max(1, 1 + (n - nfft) // hop)
@@ -87,13 +128,45 @@ def _band(fs: int, nfft: int = NFFT) -> np.ndarray:
 
 
 def grid_points(lo: np.ndarray, hi: np.ndarray, step: float) -> np.ndarray:
+    """The points of a regular grid over a box.
+
+    Parameters
+    ----------
+    lo, hi : numpy.ndarray [shape=(3,)]
+        The box's low and high corners in metres.
+    step : float
+        The grid's spacing in metres; each axis runs from ``lo`` up to ``hi`` inclusive.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(P, 3)]
+        The points, in metres.
+    """
     axes = [np.arange(a, b + 1e-9, step) for a, b in zip(lo, hi)]
     return np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
 
 
 def search_box(captures: list[Capture], *, bounds=None) -> tuple[np.ndarray, np.ndarray]:
-    """Where sources are sought: ``bounds`` ((3,), (3,)) if given (the reconstructed room), else
-    the captures' extent grown by 4 m across and 2 m up and down."""
+    """Where sources are sought: ``bounds`` if given (the reconstructed room), else the captures'
+    extent grown by 4 m across, 2 m down and 1.5 m up.
+
+    Parameters
+    ----------
+    captures : list of Capture
+        The captures; their array centres set the default box.
+    bounds : tuple of two array_like [shape=(3,)], optional
+        The box's (low corner, high corner) in metres.
+
+    Returns
+    -------
+    lo, hi : numpy.ndarray [shape=(3,)]
+        The box's corners in metres.
+
+    Raises
+    ------
+    VrechoError
+        For ``bounds`` that are not two finite 3-vectors with low < high on every axis.
+    """
     if bounds is not None:
         lo, hi = (np.asarray(b, dtype=float) for b in bounds)
         if lo.shape != (3,) or hi.shape != (3,) or np.any(hi <= lo) or not np.all(np.isfinite([lo, hi])):
@@ -124,7 +197,32 @@ def _sphere(n: int) -> np.ndarray:
 
 
 def triangulate(centers: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, float]:
-    """Least-squares point nearest rays ``centers + t * directions`` and its standard error (m)."""
+    """Least-squares point nearest rays ``centers + t * directions``, and its standard error.
+
+    Parameters
+    ----------
+    centers : numpy.ndarray [shape=(n, 3)]
+        The rays' origins in metres.
+    directions : numpy.ndarray [shape=(n, 3)]
+        The rays' unit directions.
+
+    Returns
+    -------
+    x : numpy.ndarray [shape=(3,)]
+        The point in metres.
+    sigma : float
+        Its standard error in metres; NaN for fewer than three rays.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from localization.locate import triangulate
+    >>> centers = np.array([[0.0, 0, 0], [2.0, 0, 0]])
+    >>> directions = np.array([[1.0, 1, 0], [-1.0, 1, 0]]) / np.sqrt(2)
+    >>> x, sigma = triangulate(centers, directions)
+    >>> x.round(3)
+    array([1., 1., 0.])
+    """
     P = np.eye(3)[None] - directions[:, :, None] * directions[:, None, :]
     A = P.sum(axis=0)
     x = np.linalg.solve(A, np.einsum("nij,nj->i", P, centers))
@@ -155,6 +253,23 @@ class Votes:
     narrowband bin whose grating lobes are nearly as good as the truth, counts little. A
     capture's direction map is the sum of its bins' votes; the world map at a point is the mean
     over captures of each one's map toward that point.
+
+    Parameters
+    ----------
+    captures : list of Capture
+        Checked captures (:func:`check_captures`), at one sample rate.
+
+    Attributes
+    ----------
+    dirs : numpy.ndarray [shape=(D, 3)]
+        The directions voted for: unit vectors on a grid of ``AZ_STEP`` degrees in azimuth and
+        ``EL_STEP`` in elevation, up to ``EL_MAX`` either way.
+    votes : list of numpy.ndarray [shape=(bins, D), dtype=float32]
+        Each capture's onset bins' votes.
+    weights : list of numpy.ndarray [shape=(bins,), dtype=float32]
+        What is left of each bin's vote (1 until :meth:`explain` withdraws some).
+    maps : list of numpy.ndarray [shape=(D,)]
+        Each capture's direction map: its bins' weighted votes, over their count.
     """
 
     AZ_STEP, EL_STEP, EL_MAX = 4.0, 4.0, 84.0
@@ -193,7 +308,19 @@ class Votes:
         self.maps = [(w @ v) / max(len(w), 1) for v, w in zip(self.votes, self.weights)]
 
     def lookup(self, k: int, u: np.ndarray) -> np.ndarray:
-        """Capture ``k``'s map toward unit vectors ``u`` (N, 3), bilinear in azimuth and elevation."""
+        """Capture ``k``'s map toward unit vectors, bilinear in azimuth and elevation.
+
+        Parameters
+        ----------
+        k : int
+            The capture's index.
+        u : numpy.ndarray [shape=(N, 3)]
+            Unit vectors (world frame); elevations beyond ``EL_MAX`` read the map's edge.
+
+        Returns
+        -------
+        numpy.ndarray [shape=(N,)]
+        """
         az = np.mod(np.arctan2(u[:, 1], u[:, 0]), 2 * np.pi) / np.radians(self.AZ_STEP)
         el = (np.clip(np.arcsin(np.clip(u[:, 2], -1, 1)), -np.radians(self.EL_MAX), np.radians(self.EL_MAX))
               + np.radians(self.EL_MAX)) / np.radians(self.EL_STEP)
@@ -205,7 +332,17 @@ class Votes:
                 + fa * fe * m[i1, j0 + 1])
 
     def power(self, points: np.ndarray) -> np.ndarray:
-        """The world map at ``points`` (N, 3)."""
+        """The world map at ``points``: the mean over captures of each one's map toward them.
+
+        Parameters
+        ----------
+        points : numpy.ndarray [shape=(N, 3)]
+            World points in metres.
+
+        Returns
+        -------
+        numpy.ndarray [shape=(N,)]
+        """
         out = []
         for k, c in enumerate(self.captures):
             d = points - c.center
@@ -214,7 +351,16 @@ class Votes:
         return np.mean(out, axis=0)
 
     def explain(self, point: np.ndarray):
-        """Withdraw from every bin the share of its vote a source at ``point`` accounts for."""
+        """Withdraw from every bin the share of its vote a source at ``point`` accounts for.
+
+        Each bin's weight is multiplied by 1 - score^2, its score being its normalised beam
+        power toward the grid direction nearest the point; the maps are made again.
+
+        Parameters
+        ----------
+        point : numpy.ndarray [shape=(3,)]
+            The source's world position in metres.
+        """
         for k, c in enumerate(self.captures):
             u = (point - c.center) / np.linalg.norm(point - c.center)
             score = self.votes[k][:, int(np.argmax(self.dirs @ u))] ** (1.0 / self.GAMMA)
@@ -226,8 +372,33 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
            max_sources: int = 4, min_strength: float = 0.25) -> Located:
     """World positions of the sources heard across ``captures`` (see the module's docstring).
 
-    ``n_sources``: how many to find (None: estimated, at most ``max_sources``; a next peak weaker
-    than ``min_strength`` times the first is not a source). ``bounds``: the search box.
+    Parameters
+    ----------
+    captures : Capture or iterable of Capture
+        The walk's captures, at one sample rate, each with at least 2 microphones.
+    n_sources : int, optional
+        How many to find (None: estimated, at most ``max_sources``; a next peak weaker than
+        ``min_strength`` times the first is not a source).
+    bounds : tuple of two array_like [shape=(3,)], optional
+        The search box's (low corner, high corner) in metres (:func:`search_box`).
+    step_m : float
+        The search grid's spacing in metres (default 0.1), before refinement.
+    max_sources : int
+        The most sources an estimated count gives (default 4).
+    min_strength : float
+        The share of the first source's map peak below which an estimated count stops (default
+        0.25).
+
+    Returns
+    -------
+    Located
+        The positions, their standard errors, strengths and directions from each capture.
+
+    Raises
+    ------
+    VrechoError
+        For bad captures (:func:`check_captures`), an ``n_sources`` that is not a positive whole
+        number or None, or bad ``bounds``.
     """
     captures = check_captures(captures)
     if n_sources is not None and (isinstance(n_sources, bool) or not isinstance(n_sources, (int, np.integer))
@@ -265,10 +436,34 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
 
 def doa(capture: Capture, n_sources: int, *, method: str = "NormMUSIC", n_grid: int = 6000,
         n_freq: int | None = None) -> np.ndarray:
-    """Directions (n_sources, 3) of the sources one capture hears, by a pyroomacoustics method
-    on a sphere grid of ``n_grid`` points, as unit vectors from the array centre (world frame).
-    ``n_freq``: use only that many frequency bins, evenly spread over the band (CSSM, WAVES and
-    TOPS take about 20 s per capture on all of them)."""
+    """Directions of the sources one capture hears, by a pyroomacoustics method.
+
+    Parameters
+    ----------
+    capture : Capture
+        The capture, with at least 2 microphones.
+    n_sources : int
+        How many directions to give; MUSIC, NormMUSIC, CSSM, WAVES and TOPS find fewer sources
+        than microphones.
+    method : str
+        One of :data:`PRA_METHODS` (default "NormMUSIC").
+    n_grid : int
+        The number of points of the sphere grid searched (default 6000).
+    n_freq : int, optional
+        Use only that many frequency bins, evenly spread over the band :data:`BAND_HZ` (CSSM,
+        WAVES and TOPS take about 20 s per capture on all of them); None: the whole band.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(n_sources, 3)]
+        Unit vectors from the array centre (world frame); where the method finds fewer peaks
+        than asked, the strongest is repeated.
+
+    Raises
+    ------
+    VrechoError
+        For a bad capture, an unknown method, or too many sources for the method.
+    """
     import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
 
     (capture,) = check_captures([capture])

@@ -38,9 +38,24 @@ WEIGHTS = Path(__file__).resolve().parent / "assets" / "masknet.pt"
 
 
 def features(X: np.ndarray, A: np.ndarray) -> np.ndarray:
-    """X (T, F, M) a capture's STFT, A (F, M, K) the steering vectors of K >= 2 sources: the
-    network's input for each source as the target, (K, 5, F, T) float32 (see the module's
-    docstring; one source owns every bin, :func:`source_masks` needs no network for it)."""
+    """The network's input for each source as the target (see the module's docstring).
+
+    One source owns every bin: :func:`source_masks` needs no network for it.
+
+    Parameters
+    ----------
+    X : numpy.ndarray [shape=(T, F, M), dtype=complex]
+        A capture's STFT.
+    A : numpy.ndarray [shape=(F, M, K), dtype=complex]
+        The steering vectors of K >= 2 sources (:func:`localization.separate.steering`).
+
+    Returns
+    -------
+    numpy.ndarray [shape=(K, 5, F, T), dtype=float32]
+        Per source: microphone 0's log power, the coherence with its steering vector and the
+        largest with the others', its beam's log power and the largest of the others' (the log
+        powers normalised by microphone 0's mean and standard deviation).
+    """
     T, F, M = X.shape
     K = A.shape[-1]
     An = A / np.linalg.norm(A, axis=1, keepdims=True)
@@ -66,20 +81,46 @@ def features(X: np.ndarray, A: np.ndarray) -> np.ndarray:
 
 
 def masknet_class():
-    """The network's class (made on first use: torch loads only when separation is informed)."""
+    """The network's class (made on first use: torch loads only when separation is informed).
+
+    Returns
+    -------
+    type
+        ``MaskNet(ch=32)``, a ``torch.nn.Module`` whose ``forward`` maps features (B, 5, F, T)
+        (:func:`features`) to shares (B, F, T) in [0, 1].
+    """
     import torch  # heavy (1.7 s to import): only informed separation needs it
     from torch import nn  # heavy (1.7 s to import): only where a model runs
 
     class Block(nn.Module):
+        """A residual dilated 3 x 3 convolution with PReLU.
+
+        Parameters
+        ----------
+        ch : int
+            Channels in and out.
+        dt, df : int
+            The dilation in time and in frequency.
+        """
+
         def __init__(self, ch: int, dt: int, df: int):
             super().__init__()
             self.conv = nn.Conv2d(ch, ch, 3, padding=(df, dt), dilation=(df, dt))
             self.act = nn.PReLU(ch)
 
         def forward(self, x):
+            """``x`` plus the block's response, (B, ch, F', T) either way."""
             return x + self.act(self.conv(x))
 
     class MaskNet(nn.Module):
+        """The U-shaped mask network (see the module's docstring).
+
+        Parameters
+        ----------
+        ch : int
+            Channels at full frequency resolution (default 32; twice that in the middle).
+        """
+
         DILATIONS = ((1, 1), (2, 1), (4, 2), (8, 1), (16, 4), (32, 1), (1, 2), (2, 1))  # (time, frequency)
 
         def __init__(self, ch: int = 32):
@@ -92,6 +133,7 @@ def masknet_class():
             self.out = nn.Conv2d(ch, 1, 1)
 
         def forward(self, f):  # (B, 5, F, T) -> (B, F, T)
+            """Features (B, 5, F, T) float32 (:func:`features`) to shares (B, F, T) in [0, 1]."""
             B, _, F, T = f.shape
             freq = torch.linspace(-1, 1, F, dtype=f.dtype, device=f.device)[None, None, :, None].expand(B, 1, F, T)
             x = torch.cat([f, freq], 1).contiguous(memory_format=torch.channels_last)
@@ -105,7 +147,13 @@ def masknet_class():
 
 @functools.lru_cache(maxsize=1)
 def load_masknet():
-    """The shipped network, in evaluation mode."""
+    """The shipped network (``assets/masknet.pt``, loaded once), in evaluation mode.
+
+    Returns
+    -------
+    torch.nn.Module
+        The network of :func:`masknet_class`, in single precision.
+    """
     import torch  # heavy (1.7 s to import): only informed separation needs it
 
     state = {k: v.float() for k, v in torch.load(WEIGHTS, map_location="cpu", weights_only=True).items()}  # shipped in half precision
@@ -115,8 +163,20 @@ def load_masknet():
 
 
 def source_masks(X: np.ndarray, A: np.ndarray) -> np.ndarray:
-    """Each bin's share of each source, (T, F, K), from a 16 kHz capture's STFT ``X`` (T, F, M)
-    and the sources' steering vectors ``A`` (F, M, K)."""
+    """Each bin's share of each source.
+
+    Parameters
+    ----------
+    X : numpy.ndarray [shape=(T, F, M), dtype=complex]
+        A 16 kHz capture's STFT (512 points).
+    A : numpy.ndarray [shape=(F, M, K), dtype=complex]
+        The sources' steering vectors.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(T, F, K), dtype=float64]
+        Shares in [0, 1]; all 1 for a single source.
+    """
     import torch  # heavy (1.7 s to import): only informed separation needs it
 
     if A.shape[-1] == 1:

@@ -47,8 +47,20 @@ def _blind_nfft(fs: int) -> int:
 
 
 def analysis(audio: np.ndarray, nfft: int) -> np.ndarray:
-    """Short-time spectra (frames, freq, channels) of ``audio`` (channels, samples), as
-    pyroomacoustics' separation expects them: Hann window of ``nfft`` points, hop ``nfft / 4``."""
+    """Short-time spectra as pyroomacoustics' separation expects them: Hann window of ``nfft``
+    points, hop ``nfft / 4``.
+
+    Parameters
+    ----------
+    audio : numpy.ndarray [shape=(channels, samples)]
+        The signals.
+    nfft : int
+        Frame length in samples.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(frames, nfft // 2 + 1, channels), dtype=complex]
+    """
     import pyroomacoustics as pra  # heavy (1.4 s to import): only separation needs it here
 
     win = pra.hann(nfft)
@@ -56,7 +68,21 @@ def analysis(audio: np.ndarray, nfft: int) -> np.ndarray:
 
 
 def synthesis(Y: np.ndarray, n: int, nfft: int) -> np.ndarray:
-    """(k, n) signals from (frames, freq, k) spectra made by :func:`analysis`."""
+    """Signals from spectra made by :func:`analysis`, its delay taken out.
+
+    Parameters
+    ----------
+    Y : numpy.ndarray [shape=(frames, nfft // 2 + 1, k), dtype=complex]
+        The spectra.
+    n : int
+        The signals' length in samples (cut, or padded with zeros).
+    nfft : int
+        The frame length :func:`analysis` used.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(k, n), dtype=float64]
+    """
     import pyroomacoustics as pra  # heavy (1.4 s to import): only separation needs it here
 
     out = np.zeros((Y.shape[-1], n))
@@ -69,9 +95,17 @@ def synthesis(Y: np.ndarray, n: int, nfft: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Separator:
-    """One separation method of :data:`SEPARATORS`: ``run(capture, n_sources, positions, n_iter)``
-    returns (n_sources, samples); ``multichannel``: it separates at most as many sources as the
-    capture has microphones; ``informed``: it needs the sources' positions."""
+    """One separation method of :data:`SEPARATORS`.
+
+    Parameters
+    ----------
+    run : callable
+        ``run(capture, n_sources, positions, n_iter)`` returns (n_sources, samples).
+    multichannel : bool
+        It separates at most as many sources as the capture has microphones (default True).
+    informed : bool
+        It needs the sources' positions (default False).
+    """
 
     run: Callable[..., np.ndarray]
     multichannel: bool = True
@@ -113,8 +147,38 @@ def _fastmnmf(capture: Capture, X: np.ndarray, k: int, n_iter: int) -> np.ndarra
 
 def separate(capture: Capture, n_sources: int, *, method: str = "informed", positions=None,
              n_iter: int | None = None) -> np.ndarray:
-    """Separate ``n_sources`` sources from ``capture`` (see the module's docstring); ``n_iter``:
-    the iterations of the blind methods and NMF (informed separation has none)."""
+    """Separate ``n_sources`` sources from ``capture`` (see the module's docstring).
+
+    Parameters
+    ----------
+    capture : Capture
+        The recording.
+    n_sources : int
+        How many sources; a multichannel method separates at most as many as the capture has
+        microphones.
+    method : str
+        One of :data:`METHODS`: "auxiva", "ilrma", "fastmnmf", "nmf" or "informed" (the
+        default).
+    positions : array_like [shape=(n_sources, 3)], optional
+        The sources' world positions in metres (:func:`localization.locate`); needed by
+        ``informed``, which returns the sources in their order.
+    n_iter : int, optional
+        The iterations of the blind methods and NMF (None: 50 and 200; informed separation has
+        none).
+
+    Returns
+    -------
+    numpy.ndarray [shape=(n_sources, samples), dtype=float64]
+        Each source as it sounds at microphone 0, the capture's length, at its rate.
+
+    Raises
+    ------
+    VrechoError
+        For a ``capture`` that is not a :class:`Capture`, an unknown method, an ``n_sources``
+        that is not a positive whole number or exceeds a multichannel method's microphones,
+        missing or bad ``positions`` for ``informed``, or (ilrma) a demixing matrix that became
+        singular.
+    """
     if not isinstance(capture, Capture):
         raise VrechoError(f"capture: expected a localization.Capture, got {type(capture).__name__}")
     if method not in SEPARATORS:
@@ -136,7 +200,23 @@ def separate(capture: Capture, n_sources: int, *, method: str = "informed", posi
 
 
 def steering(capture: Capture, positions: np.ndarray, freqs: np.ndarray) -> np.ndarray:
-    """Near-field steering vectors (freq, mics, sources), relative to microphone 0."""
+    """Near-field steering vectors, relative to microphone 0.
+
+    Parameters
+    ----------
+    capture : Capture
+        Gives the microphones' positions.
+    positions : numpy.ndarray [shape=(K, 3)]
+        The sources' world positions in metres.
+    freqs : numpy.ndarray [shape=(F,)]
+        Frequencies in Hz.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(F, M, K), dtype=complex128]
+        Each microphone's gain (distance ratio to microphone 0's) and phase (delay relative to
+        microphone 0's) for each source; microphone 0's entries are 1.
+    """
     dist = np.linalg.norm(capture.mics[None] - positions[:, None], axis=-1).T  # (M, K)
     rel = dist - dist[:1]
     return (dist[:1] / dist)[None] * np.exp(-2j * np.pi * freqs[:, None, None] * rel[None] / SPEED_OF_SOUND)

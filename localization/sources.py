@@ -12,10 +12,21 @@ import numpy as np
 class PlacedSource:
     """A separated sound source at a world position.
 
-    ``position`` (3,) in metres, vrecho's world frame (Z up); ``signal`` the separated mono
-    signal (1-D float array at ``fs`` Hz) or the path of a WAV file holding it; ``confidence``
-    in [0, 1]; ``uncertainty_m`` the position's standard error where one is known; ``name`` a
-    label for people and for file names.
+    Parameters
+    ----------
+    position : numpy.ndarray [shape=(3,)]
+        In metres, vrecho's world frame (Z up).
+    signal : numpy.ndarray [shape=(n,)], str or pathlib.Path
+        The separated mono signal (1-D float array at ``fs`` Hz) or the path of a WAV file
+        holding it.
+    fs : int
+        The signal's sample rate in Hz (a WAV file's own rate is read from it).
+    confidence : float
+        In [0, 1] (default 1).
+    name : str
+        A label for people and for file names.
+    uncertainty_m : float or None
+        The position's standard error in metres where one is known.
     """
 
     position: np.ndarray

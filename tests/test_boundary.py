@@ -1,4 +1,4 @@
-"""vrecho.boundary: the headset call, on walks simulated with pyroomacoustics in a small room."""
+"""vrecho.headset.BoundaryMonitor (also vrecho.boundary): the headset call, on walks simulated with pyroomacoustics in a small room."""
 
 import dataclasses
 
@@ -9,7 +9,6 @@ from conftest import small_room
 from vrecho.headset import BoundaryMonitor, ranging_probe
 from vrecho.errors import VrechoError
 from vrecho.sim.render import World
-from vrecho.scene import Discontinuity
 from vrecho.sim.walks import echo_round_trip_s, headset_frames, simulate_walk
 
 FS = 48000

@@ -176,6 +176,7 @@ def posed(tmp_path_factory):
     return scene, simulate_capture(scene, folder, n_pulses=16, fps=3, camera=Camera(200, 150), seed=3)
 
 
+@pytest.mark.slow
 def test_a_posed_capture_repairs_the_users_mesh_and_exports(posed, tmp_path):
     import csv
     import json
@@ -232,6 +233,7 @@ def test_a_posed_capture_repairs_the_users_mesh_and_exports(posed, tmp_path):
     assert sorted(v for v in states.values() if v != "unknown") == ["closed", "closed", "open"]
 
 
+@pytest.mark.slow
 def test_poses_that_do_not_fit_the_capture_are_one_clear_error(posed, tmp_path):
     import shutil
 
@@ -264,6 +266,7 @@ def test_poses_that_do_not_fit_the_capture_are_one_clear_error(posed, tmp_path):
             capture(tmp_path / "o", sim["video"], **kwargs)
 
 
+@pytest.mark.slow
 def test_a_y_up_model_is_turned_z_up(posed, tmp_path):
     from vrecho import colmap
     from vrecho.capture import read_poses

@@ -149,6 +149,7 @@ def test_a_tiny_model_beats_chance(tiny_dataset, tmp_path):
     assert res["EchoCNN-E"]["depth_median_cm"] * 3 < chance_cm, (res["EchoCNN-E"]["depth_median_cm"], chance_cm)
 
 
+@pytest.mark.slow
 def test_train_and_evaluate_commands(tiny_dataset, tmp_path):
     run = tmp_path / "run"
     r = run_cli("train", "--data", tiny_dataset, "--out", run, "--method", "EchoCNN-A", "--method", "kNN",
@@ -166,6 +167,7 @@ def test_train_and_evaluate_commands(tiny_dataset, tmp_path):
     assert "EchoCNN-A" in json.loads((out / "metrics.json").read_text())["results"]
 
 
+@pytest.mark.slow
 def test_commands_refuse_bad_input(tiny_dataset, tmp_path):
     r = run_cli("evaluate", "--data", tiny_dataset, "--run", tmp_path / "empty", "--quiet")
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "no trained methods" in r.stderr

@@ -10,7 +10,6 @@ import zarr
 
 from vrecho.learn.datasets import LABEL_COLUMNS, generate, open_dataset, read_labels
 from vrecho.errors import VrechoError
-from vrecho.scene import load_scene
 from vrecho.signals import SOUNDS, TRAIN_SOUNDS
 
 
@@ -58,6 +57,7 @@ def test_splits_are_by_room_and_the_paper_protocol(tiny_dataset):
     assert set(lab["sound"]) == set(SOUNDS)
 
 
+@pytest.mark.slow
 def test_interrupted_generate_resumes_and_the_seed_fixes_every_array(tiny_dataset, tmp_path):
     out = tmp_path / "ds"
     # One worker makes the interruption deterministic: rooms run one after another.

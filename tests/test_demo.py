@@ -4,6 +4,7 @@ opened by a real headless Chromium (Debian's package, installed by ``install.sh 
 import json
 
 import numpy as np
+import pytest
 from conftest import run_cli
 
 from vrecho.scene import builtin_scene
@@ -60,6 +61,7 @@ def test_walkthrough_page_shows_the_scene_in_headless_chromium(tmp_path):
     assert np.mean(np.abs(top - np.median(top, axis=1, keepdims=True)).sum(axis=2) > 40) > 0.1
 
 
+@pytest.mark.slow
 def test_the_demo_runs_the_whole_pipeline_on_the_living_room(tmp_path):
     out = tmp_path / "out"
     r = run_cli("demo", "--out", out, "--no-browser", "--quiet", timeout=900)
@@ -91,6 +93,7 @@ def test_the_demo_runs_the_whole_pipeline_on_the_living_room(tmp_path):
     assert _alert_red(img) > 20 and _source_orange(img) > 50
 
 
+@pytest.mark.slow
 def test_the_demo_on_a_users_scene_with_the_page_elsewhere(tmp_path):
     from conftest import small_room
 

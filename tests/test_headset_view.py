@@ -1,4 +1,4 @@
-"""vrecho.headset_view: the headset camera's answer about the surface an echo found."""
+"""vrecho.headset.view: the headset camera's answer about the surface an echo found."""
 
 import numpy as np
 import pytest

@@ -162,3 +162,68 @@ def test_the_rules_catch_what_they_are_for(rule, monkeypatch):
     monkeypatch.setitem(TREES, bad, ast.parse(source + bad.read_text()))
     with pytest.raises(AssertionError):
         rule()
+
+
+def _public_calls():
+    """(module path, qualified name, node, class node or None) of every public function and
+    method of the packages (``__call__`` included; properties and ``__init__`` apart)."""
+    for path in MODULES.values():
+        def walk(body, cls=None):
+            for n in body:
+                if isinstance(n, ast.ClassDef) and not n.name.startswith("_"):
+                    yield from walk(n.body, n)
+                elif isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) \
+                        and (not n.name.startswith("_") or n.name == "__call__"):
+                    if not any(getattr(d, "id", getattr(d, "attr", "")) in ("property", "cached_property", "setter")
+                               for d in n.decorator_list):
+                        yield path, (f"{cls.name}." if cls else "") + n.name, n, cls
+        yield from walk(TREES[path].body)
+
+
+def _section(doc: str, *names: str) -> bool:
+    lines = doc.splitlines()
+    return any(a.strip() in names and set(b.strip()) == {"-"} for a, b in zip(lines, lines[1:]))
+
+
+def test_public_calls_have_numpydoc_docstrings():
+    """Rule 4: a public call documents its parameters (a constructor's in its class docstring) and
+    what it returns, numpydoc style."""
+    missing = []
+    for path, name, node, cls in _public_calls():
+        doc = ast.get_docstring(node) or ""
+        params = [a.arg for a in node.args.posonlyargs + node.args.args + node.args.kwonlyargs
+                  if a.arg not in ("self", "cls")]
+        returns = any(isinstance(n, ast.Return) and n.value is not None for n in ast.walk(node)) \
+            or any(isinstance(n, (ast.Yield, ast.YieldFrom)) for n in ast.walk(node))
+        where = f"{path.relative_to(ROOT)}:{node.lineno} {name}"
+        if not doc:
+            missing.append(f"{where}: no docstring")
+        if params and not _section(doc, "Parameters"):
+            missing.append(f"{where}: no Parameters")
+        if returns and not _section(doc, "Returns", "Yields"):
+            missing.append(f"{where}: no Returns")
+    for path in MODULES.values():  # a class documents its constructor's parameters, or its fields
+        for n in TREES[path].body:
+            if isinstance(n, ast.ClassDef) and not n.name.startswith("_"):
+                init = next((m for m in n.body if isinstance(m, ast.FunctionDef) and m.name == "__init__"), None)
+                fields = [m for m in n.body if isinstance(m, ast.AnnAssign)]
+                args = [] if init is None else [a for a in init.args.args[1:] + init.args.kwonlyargs]
+                doc = ast.get_docstring(n) or ""
+                if (args or fields) and not _section(doc, "Parameters", "Attributes"):
+                    missing.append(f"{path.relative_to(ROOT)}:{n.lineno} class {n.name}: no Parameters or Attributes")
+    assert not missing, f"{len(missing)} public calls without numpydoc sections:\n" + "\n".join(missing)
+
+
+def test_the_public_calls_keep_their_names():
+    """The calls ARCHITECTURE.md names stay where users find them."""
+    import localization
+    import usd_export
+    import vrecho
+    import vrecho.boundary
+    import vrecho.headset
+
+    assert vrecho.boundary.BoundaryMonitor is vrecho.headset.BoundaryMonitor
+    for call in (vrecho.load_classifier, localization.place_sources, localization.locate, localization.separate,
+                 usd_export.write_scene, usd_export.validate):
+        assert callable(call)
+    assert vrecho.Classifier.__name__ == "Classifier"  # torch loads on this first use only

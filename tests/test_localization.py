@@ -23,7 +23,7 @@ def two_sources():
     from localization.capture import FS
     from vrecho.sim.ambient import AmbientSource, Shoebox, simulate_walk_capture
     from vrecho.sim.sounds import ambient_sound
-    from vrecho.scene import DevicePose
+    from vrecho.device import DevicePose
 
     rng = np.random.default_rng(3)
     room = Shoebox((4.5, 4.0, 2.7), 0.3)
@@ -82,6 +82,7 @@ def test_informed_at_another_rate(two_sources):
     assert _sir_gain(resample_poly(sim.images[4, :, 0], 3, 1, axis=1), y, hi.audio[0]) > 12.0  # 18.7 dB
 
 
+@pytest.mark.slow
 def test_mask_network(two_sources, tmp_path):
     """Shares from 0 to 1 per bin and source, each source's larger where it is louder; one source
     owns every bin; a tiny training run writes weights the shipped network's shape."""
@@ -183,6 +184,7 @@ def test_sounds():
         ambient_sound("opera", 1.0, 16000, np.random.default_rng(0))
 
 
+@pytest.mark.slow
 def test_export_places_the_sources_it_hears(tmp_path, capsys):
     """`vrecho export --sources heard`: the scene's source recorded along the walkthrough by the
     headset, located, separated and written as spatial audio where it was heard."""

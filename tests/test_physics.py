@@ -5,7 +5,8 @@ import pytest
 
 from vrecho.sim.acoustics import SPEED_OF_SOUND, device_direct_amplitude, device_impulse_response, echo_delay_s, record_pulse
 from vrecho.features import echo_response
-from vrecho.scene import WINDOW_GLASS, Discontinuity, Material, Room, Scene
+from vrecho.materials import WINDOW_GLASS, Material
+from vrecho.scene import Discontinuity, Room, Scene
 from vrecho.sim.scenes import face
 from vrecho.signals import FS, probe
 
@@ -66,7 +67,7 @@ def test_echo_delay_and_opening_energy(depth, tmp_path):
 
 def test_headset_array_hears_each_microphone_at_its_distance(tmp_path):
     from vrecho.sim.acoustics import impulse_responses
-    from vrecho.scene import MIC_ARRAYS
+    from vrecho.device import MIC_ARRAYS
 
     scene = _scene("glass")
     pose = face(scene, 0, 1.5)

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from vrecho.errors import VrechoError
-from vrecho.scene import DEPTH_RANGE_M, MAX_INCIDENCE_DEG, MIC_ABOVE_EMITTER_M, Scene, builtin_scene, load_scene
+from vrecho.device import MIC_ABOVE_EMITTER_M
+from vrecho.scene import DEPTH_RANGE_M, MAX_INCIDENCE_DEG, builtin_scene, load_scene
 from vrecho.sim.scenes import face, random_scene, walkthrough_path
 
 

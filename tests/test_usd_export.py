@@ -187,6 +187,7 @@ def test_export_command(tmp_path, capsys):
     assert not any(Path(tmp_path).iterdir())
 
 
+@pytest.mark.slow
 def test_export_command_writes_a_clean_package(tmp_path, capsys):
     from conftest import export_small_room
 

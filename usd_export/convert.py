@@ -15,10 +15,25 @@ from .stage import LabeledSurface
 
 
 def from_reconstruction(result) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], list[LabeledSurface]]:
-    """The room mesh without the surfaces the repair added, and every discontinuity of a
-    :class:`vrecho.reconstruct.Reconstruction` as a :class:`LabeledSurface` (added surfaces with
-    their polygon, openings with the hole's outline). ``depth_m`` is the median distance the
-    listening frames gave (None for oracle labels)."""
+    """The room mesh without the surfaces the repair added, and every discontinuity as a
+    :class:`LabeledSurface`.
+
+    Parameters
+    ----------
+    result : vrecho.reconstruct.Reconstruction
+        A reconstruction with its repaired mesh, holes, decisions and added surfaces.
+
+    Returns
+    -------
+    room : tuple of numpy.ndarray
+        (vertices (N, 3) metres, faces (F, 3) int, colours (N, 3) in [0, 1]; 0.6 grey where the
+        mesh has none), as :func:`usd_export.write_scene` takes it.
+    surfaces : list of LabeledSurface
+        One per hole, in order: added surfaces with their polygon (named
+        ``<material>_<k>``), openings (``opening_<k>``) and holes no frame listened to
+        (``hole_<k>``, state "unknown") with the hole's outline, facing the room. ``depth_m`` is
+        the median distance the listening frames gave (None for oracle labels).
+    """
     mesh = result.repaired
     vertices = np.asarray(mesh.vertices)
     faces = np.asarray(mesh.triangles)
@@ -51,9 +66,24 @@ def from_reconstruction(result) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarra
 
 
 def sources_from_scene(scene, *, seconds: int = 10) -> list:
-    """The scene's own sound sources at their true positions, each playing its sound (PROTOCOL's
-    100 ms sound once a second, at the source's gain): the truth, standing in where no
-    localization ran (``vrecho export --sources truth``)."""
+    """The scene's own sound sources at their true positions, each playing its sound.
+
+    The truth, standing in where no localization ran (``vrecho export --sources truth``).
+
+    Parameters
+    ----------
+    scene : vrecho.scene.Scene
+        The scene whose sources are taken.
+    seconds : int
+        The signals' length in seconds (default 10): PROTOCOL's 100 ms sound once a second, at
+        the source's gain.
+
+    Returns
+    -------
+    list of localization.PlacedSource
+        One per source, named ``<sound>_<k>``, at :data:`vrecho.signals.FS` (44.1 kHz),
+        confidence 1.
+    """
     out = []
     for k, s in enumerate(scene.sources):
         signal = pulse_train(emitted_sound(s.sound, FS, np.random.default_rng(k)), seconds) * 10 ** (s.gain_db / 20)
@@ -62,8 +92,26 @@ def sources_from_scene(scene, *, seconds: int = 10) -> list:
 
 
 def sources_from_json(path) -> list:
-    """Placed sources listed in a JSON file: ``[{"name", "position": [x, y, z] (metres, Z up),
-    "wav": path (relative to the file), "confidence"?, "uncertainty_m"?}, ...]``."""
+    """Placed sources listed in a JSON file.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A JSON file holding ``[{"name", "position": [x, y, z] (metres, Z up), "wav": path
+        (relative to the file), "confidence"?, "uncertainty_m"?}, ...]``.
+
+    Returns
+    -------
+    list of localization.PlacedSource
+        One per item, its signal the WAV's path (read, and its rate with it, when the stage is
+        written; ``fs`` is 0 until then); unnamed items are ``source_<i>``.
+
+    Raises
+    ------
+    VrechoError
+        For a file that cannot be read as JSON, that holds no list, or an item without
+        "position" and "wav".
+    """
     path = Path(path)
     try:
         items = json.loads(path.read_text())

@@ -41,11 +41,22 @@ TIME_CODES_PER_SECOND = 24.0
 class LabeledSurface:
     """A discontinuity of the scan as vrecho decided it.
 
-    ``polygon`` (K, 3): a planar polygon in vrecho's world frame (metres, Z up), wound
-    counter-clockwise seen from the room; ``state`` "open", "closed" or "unknown" (a hole no
-    listening frame faced: left as the scan had it); ``material`` "glass",
-    "mirror" or "wall" when closed (None when open); ``depth_m`` the plane's distance the echoes
-    gave (None if unknown); ``confidence`` in [0, 1].
+    Parameters
+    ----------
+    name : str
+        Its name; made a valid, unique prim name for ``/World/Surfaces/<name>``.
+    polygon : numpy.ndarray [shape=(K, 3)]
+        A planar polygon in vrecho's world frame (metres, Z up), K >= 3, wound
+        counter-clockwise seen from the room.
+    state : str
+        "open", "closed" or "unknown" (a hole no listening frame faced: left as the scan had
+        it).
+    material : str or None
+        "glass", "mirror" or "wall" when closed (None when open).
+    depth_m : float or None
+        The plane's distance in metres the echoes gave (None if unknown).
+    confidence : float
+        In [0, 1].
     """
 
     name: str
@@ -58,7 +69,19 @@ class LabeledSurface:
 
 @dataclass
 class Problem:
-    """One finding of :func:`validate`: ``severity`` "error", "warning" or "info"."""
+    """One finding of :func:`validate`.
+
+    Parameters
+    ----------
+    severity : str
+        "error", "warning" or "info".
+    validator : str
+        The name of the validator that found it (vrecho's own: ``vrecho:AudioResolves``).
+    message : str
+        What it found.
+    sites : list of str
+        The paths of the prims concerned (may be empty).
+    """
 
     severity: str
     validator: str
@@ -71,7 +94,25 @@ class Problem:
 
 
 def y_up(points: np.ndarray) -> np.ndarray:
-    """vrecho's Z-up world points (N, 3) in the stage's Y-up frame: (x, y, z) -> (x, z, -y)."""
+    """vrecho's Z-up world points in the stage's Y-up frame: (x, y, z) -> (x, z, -y).
+
+    Parameters
+    ----------
+    points : numpy.ndarray [shape=(..., 3)]
+        Points (N, 3), or one (3,), in metres.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(..., 3), dtype=float64]
+        The same points in the stage's frame (never -0).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from usd_export import y_up
+    >>> y_up(np.array([[1.0, 2.0, 3.0]]))
+    array([[ 1.,  3., -2.]])
+    """
     p = np.asarray(points, float)
     return np.stack([p[..., 0], p[..., 2], 0.0 - p[..., 1]], axis=-1) + 0.0  # no -0 in the file
 
@@ -165,7 +206,20 @@ def _prim_names(names: list[str], fallback: str) -> list[str]:
 # -- Writing ---------------------------------------------------------------------------------------
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals (N, 3); a vertex in no face gets +Z."""
+    """Area-weighted unit vertex normals; a vertex in no face gets +Z.
+
+    Parameters
+    ----------
+    vertices : numpy.ndarray [shape=(N, 3), dtype=float64]
+        The mesh's vertices in metres.
+    faces : numpy.ndarray [shape=(F, 3), dtype=int]
+        Its triangles, as vertex indices (each face's normal by the right-hand rule).
+
+    Returns
+    -------
+    numpy.ndarray [shape=(N, 3), dtype=float64]
+        Unit normals, in the vertices' frame.
+    """
     n = np.zeros_like(vertices)
     if len(faces):
         t = vertices[faces]
@@ -294,7 +348,23 @@ def _write_stage(stage_path: Path, audio_dir: Path, vertices, faces, colours, su
 
 
 def check_target(path: str | Path) -> Path:
-    """The stage's path, checked before any work: a known suffix, in an existing folder."""
+    """The stage's path, checked before any work: a known suffix, in an existing folder.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The stage to write.
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    VrechoError
+        For a suffix not in :data:`SUFFIXES` (``.usda``, ``.usdc``, ``.usd``, ``.usdz``), or a
+        folder that does not exist.
+    """
     path = Path(path)
     if path.suffix.lower() not in SUFFIXES:
         raise VrechoError(f"export: {path} must end in one of {', '.join(SUFFIXES)}")
@@ -313,14 +383,18 @@ def write_scene(path: str | Path, mesh, surfaces=(), sources=(), *, check: bool 
         The stage to write. For a layer, each source's WAV goes to ``<stem>_audio/`` beside it;
         a ``.usdz`` holds its WAVs inside.
     mesh : open3d.geometry.TriangleMesh or (vertices (N, 3), faces (F, 3)[, colours (N, 3)])
-        The room, in vrecho's world frame (metres, Z up), colours in [0, 1].
+        The room, in vrecho's world frame (metres, Z up): finite float vertices, N > 0,
+        integer faces indexing them, colours in [0, 1] (clipped there).
     surfaces : list of :class:`LabeledSurface`
         The discontinuities and their labels (:func:`usd_export.from_reconstruction` makes them).
     sources : list of :class:`localization.PlacedSource`
-        Sound sources, each written as a WAV and a ``UsdMedia.SpatialAudio`` prim.
+        Sound sources, each written as a WAV and a ``UsdMedia.SpatialAudio`` prim. A signal
+        given as an array is taken at the source's ``fs`` (8000 to 192000 Hz); a WAV file at
+        its own rate, its channels averaged. Each WAV is normalised to a 0.9 peak (16-bit), and
+        the prim's gain restores the sources' relative levels.
     check : bool
         Run :func:`validate` before the stage is moved into place, and refuse (raise, writing
-        nothing) while it reports an error.
+        nothing) while it reports an error (default True).
 
     Returns
     -------
@@ -333,6 +407,20 @@ def write_scene(path: str | Path, mesh, surfaces=(), sources=(), *, check: bool 
         On bad input (non-finite vertices, faces out of range, a missing WAV, an unwritable
         path, ...) or a stage with validation errors. Nothing is written then, and nothing that
         was there is touched.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> import numpy as np
+    >>> from usd_export import validate, write_scene
+    >>> vertices = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    >>> faces = np.array([[0, 1, 2]])
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> stage = write_scene(Path(tmp.name) / "room.usda", (vertices, faces))
+    >>> stage.name, validate(stage)
+    ('room.usda', [])
+    >>> tmp.cleanup()
     """
     path = check_target(path)
     vertices, faces, colours = _mesh_arrays(mesh)
@@ -383,10 +471,27 @@ def write_scene(path: str | Path, mesh, surfaces=(), sources=(), *, check: bool 
 # -- Checking --------------------------------------------------------------------------------------
 
 def validate(path: str | Path) -> list[Problem]:
-    """OpenUSD's own validators (every one UsdValidation registers: stage metadata, material
-    bindings, shader compliance, usdz packaging, ...) over the stage at ``path``, and vrecho's
-    check that every audio file a ``SpatialAudio`` prim names resolves. Returns the problems
-    (empty when the stage is clean)."""
+    """OpenUSD's own validators over the stage at ``path``, and vrecho's check of its audio.
+
+    The validators are every one UsdValidation registers (stage metadata, material bindings,
+    shader compliance, usdz packaging, ...); vrecho's check is that every audio file a
+    ``SpatialAudio`` prim names resolves.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The stage (a layer or a ``.usdz`` package).
+
+    Returns
+    -------
+    list of Problem
+        The problems (empty when the stage is clean).
+
+    Raises
+    ------
+    VrechoError
+        When ``path`` does not exist or OpenUSD cannot open it.
+    """
     from pxr import Usd, UsdMedia, UsdValidation  # OpenUSD: only when a stage is written or read
 
     path = Path(path)

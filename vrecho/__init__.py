@@ -24,7 +24,26 @@ __version__ = "0.1.0"
 
 
 def load_classifier(path=None):
-    """EchoCNN with the weights shipped in the package (or ``path``); see :mod:`vrecho.classifier`."""
+    """EchoCNN with the weights shipped in the package (or ``path``); see :mod:`vrecho.classifier`.
+
+    Nothing is downloaded; torch is imported on the first call.
+
+    Parameters
+    ----------
+    path : str or path, optional
+        A ``classifier.pt`` written by ``vrecho train``; None for the shipped weights.
+
+    Returns
+    -------
+    Classifier
+        ``predict(audio, fs, *, image=None, emitted=None)`` for one 1 s frame at ``fs`` Hz,
+        ``predict_batch`` for many.
+
+    Raises
+    ------
+    VrechoError
+        When ``path`` is not a file, or not a vrecho classifier.
+    """
     from .classifier import load_classifier as load  # torch-bound (1.7 s): loaded when the classifier is asked for
 
     return load(path)

@@ -44,13 +44,29 @@ CLIP_SHARE = 1e-3
 class Prediction:
     """What EchoCNN says about the surface in front of the device.
 
-    ``is_open``, ``material`` ("glass" or "mirror": what a closed surface is), ``depth_m`` (emitter to
-    the surface's plane; meaningful for closed surfaces), ``probabilities`` (``open``, ``closed``,
-    ``glass``, ``mirror``, and ``depth_<m>`` per 0.5 m class), ``confidence`` (probability of the
-    open/closed answer), ``low_confidence``, ``flags`` (why, beyond the probability: ``clipped``,
-    ``narrowband_emitted``), ``model`` (which variant answered) and ``source_m`` (where a source
-    heard in the frame sits, forward/left/up from the device in metres, for frames of an ambient
-    source; None when the emitted sound is given: the frame is then the device's own pulse).
+    Parameters
+    ----------
+    is_open : bool
+        Whether the surface is an opening (open probability above 0.5).
+    material : str
+        "glass" or "mirror": what a closed surface is (given for openings too).
+    depth_m : float
+        Emitter to the surface's plane, in metres; meaningful for closed surfaces.
+    probabilities : dict of str to float
+        ``open``, ``closed``, ``glass``, ``mirror``, and ``depth_<m>`` per 0.5 m class
+        (``depth_0.5`` to ``depth_3``).
+    confidence : float
+        Probability of the open/closed answer.
+    low_confidence : bool
+        True when ``confidence`` is below :data:`CONFIDENCE_FLOOR` or any flag is set.
+    model : str
+        Which variant answered, e.g. "EchoCNN-A".
+    flags : tuple of str
+        Why, beyond the probability: ``clipped``, ``narrowband_emitted``; empty by default.
+    source_m : tuple of 3 float or None
+        Where a source heard in the frame sits, forward/left/up from the device in metres, for
+        frames of an ambient source; None when the emitted sound is given: the frame is then the
+        device's own pulse.
     """
 
     is_open: bool
@@ -65,7 +81,19 @@ class Prediction:
 
 
 class Classifier:
-    """EchoCNN variants behind one ``predict``; see the module's docstring."""
+    """EchoCNN variants behind one ``predict``; see the module's docstring.
+
+    Most users get one from :func:`load_classifier`. Each model is put in evaluation mode.
+
+    Parameters
+    ----------
+    models : dict of str to torch.nn.Module
+        The variants by key: "A" (audio), "AV" (audio, image), "E" (audio, emitted) and "EV"
+        (audio, emitted, image), each an :class:`~vrecho.models.EchoCNN` or a module with its
+        ``inputs`` and heads.
+    names : dict of str to str, optional
+        Names to report per key, over the defaults "EchoCNN-A" to "EchoCNN-EV".
+    """
 
     def __init__(self, models: dict[str, torch.nn.Module], *, names: dict[str, str] | None = None):
         self.models = models
@@ -74,8 +102,42 @@ class Classifier:
             m.eval()
 
     def predict(self, audio, fs: int, *, image=None, emitted=None) -> Prediction:
-        """One 1 s frame (1-D, starting at the pulse onset) at ``fs`` Hz; optionally the 64 x 25
-        camera crop (uint8, or float in [0, 1]) and the emitted sound (1-D, at ``fs``)."""
+        """What the surface in front of the device is, from one frame.
+
+        Parameters
+        ----------
+        audio : array_like, shape (n,), float
+            One 1 s frame (starting at the pulse onset) at ``fs`` Hz, n = round(``fs``).
+        fs : int
+            Sample rate in Hz (resampled to 44.1 kHz).
+        image : array_like, shape (64, 25), optional
+            The camera crop, uint8, or float in [0, 1].
+        emitted : array_like, shape (k,), float, optional
+            The emitted sound, at ``fs``.
+
+        Returns
+        -------
+        Prediction
+            The answer of the variant for what is given (see the module's docstring).
+
+        Raises
+        ------
+        VrechoError
+            If ``audio`` or ``emitted`` is not 1-D, or for anything :meth:`predict_batch`
+            refuses.
+
+        Examples
+        --------
+        >>> from vrecho.signals import probe
+        >>> clf = load_classifier()
+        >>> s = probe()
+        >>> frame = np.zeros(44_100, np.float32)
+        >>> frame[:4410] += s
+        >>> frame[300:4710] += 0.5 * s
+        >>> p = clf.predict(frame, 44_100, emitted=s)
+        >>> p.model, p.source_m
+        ('EchoCNN-E', None)
+        """
         x = np.asarray(audio)
         if x.ndim != 1:
             raise VrechoError(f"audio: predict takes one 1-D frame, got shape {x.shape}; use predict_batch")
@@ -88,8 +150,36 @@ class Classifier:
         return self.predict_batch(x[None], fs, images=image, emitted=emitted)[0]
 
     def predict_batch(self, audio, fs: int, *, images=None, emitted=None) -> list[Prediction]:
-        """Many frames at once: ``audio`` (B, n); ``images`` (B, 64, 25) or None; ``emitted`` one
-        sound for all (k,) or one per frame (B, k), or None."""
+        """Many frames at once, each answered as by :meth:`predict`.
+
+        A frame with at least :data:`CLIP_SHARE` of its samples at full scale is flagged
+        ``clipped``; an emitted sound that leaves part of 200 Hz to 16 kHz more than 40 dB below
+        its strongest octave is flagged ``narrowband_emitted``.
+
+        Parameters
+        ----------
+        audio : array_like, shape (B, n), float
+            1 s frames (starting at the pulse onset) at ``fs`` Hz, n = round(``fs``); one 1-D
+            frame is taken as a batch of one.
+        fs : int
+            Sample rate in Hz (resampled to 44.1 kHz).
+        images : array_like, shape (B, 64, 25), optional
+            The camera crops, uint8, or float in [0, 1]; or None.
+        emitted : array_like, shape (k,) or (B, k), float, optional
+            One sound for all frames or one per frame, at ``fs``; or None.
+
+        Returns
+        -------
+        list of Prediction
+            One per frame, in order.
+
+        Raises
+        ------
+        VrechoError
+            For frames :func:`~vrecho.features.check_frames` refuses or a silent frame (RMS
+            below 1e-6), emitted sounds :func:`~vrecho.features.check_emitted` refuses, or
+            images of another shape, or not uint8 or finite floats in [0, 1].
+        """
         x = check_frames(audio, fs)
         if x.ndim == 1:
             x = x[None]
@@ -159,8 +249,30 @@ def _narrowband(s: np.ndarray) -> np.ndarray:
 
 
 def load_classifier(path: str | Path | None = None) -> Classifier:
-    """EchoCNN with the weights shipped in the package, or those of ``path`` (a ``classifier.pt``
-    written by ``vrecho train``)."""
+    """EchoCNN with the weights shipped in the package, or those of ``path``.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path, optional
+        A ``classifier.pt`` written by ``vrecho train``; the package's
+        ``vrecho/assets/echocnn.pt`` when None.
+
+    Returns
+    -------
+    Classifier
+        The four variants "A", "AV", "E" and "EV", in evaluation mode, float32.
+
+    Raises
+    ------
+    VrechoError
+        If ``path`` does not exist, is not a vrecho classifier, or lacks one of the four
+        variants.
+
+    Examples
+    --------
+    >>> sorted(load_classifier().models)
+    ['A', 'AV', 'E', 'EV']
+    """
     if path is None:
         with resources.as_file(resources.files("vrecho.assets") / "echocnn.pt") as p:
             return _load(p)

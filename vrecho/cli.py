@@ -18,6 +18,19 @@ from .reconstruct import LABELS, VARIANTS
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``vrecho`` command's parser: one subcommand per function of :mod:`vrecho.app`.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        Parsed arguments carry ``func``, which runs the subcommand on them.
+
+    Examples
+    --------
+    >>> args = build_parser().parse_args(["generate", "--out", "data"])
+    >>> args.command, args.preset, args.seed
+    ('generate', 'tiny', 0)
+    """
     parser = argparse.ArgumentParser(prog="vrecho", description="Audio-augmented 3D scene reconstruction.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -127,10 +140,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="metres from the playing loudspeaker to the filming microphone (default 0.07, "
                         "PROTOCOL.md's device: the second phone held against the first)")
     c.add_argument("--out", type=Path, required=True, help="output folder")
-    c.add_argument("--quiet", action="store_true", help="no progress bars")
+    c.add_argument("--quiet", action="store_true", help="accepted for scripts: capture shows no progress bars")
     c.set_defaults(func=lambda a: app.capture(a.out, a.video, a.audio, a.images, a.poses, a.mesh,
                                                image_fps=a.image_fps, labels=a.labels,
-                                               emitter_distance_m=a.emitter_distance, progress=not a.quiet))
+                                               emitter_distance_m=a.emitter_distance))
 
     d = sub.add_parser("demo", help="the whole run on the built-in living room, as a meshcat walkthrough",
                        description="Simulate the built-in scene (or --scene FILE) and run all of vrecho on it: the "
@@ -152,6 +165,26 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the ``vrecho`` command.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments (default: the command line's). Arguments argparse refuses, and
+        ``--help``, end in its own :class:`SystemExit`.
+
+    Returns
+    -------
+    int
+        The exit status: 0, 2 after bad input (one line on stderr) or 130 after an interrupt.
+
+    Examples
+    --------
+    A scene that is not there: ``vrecho: error: scene: ...`` on stderr, and status 2.
+
+    >>> main(["reconstruct", "no-such-scene.json", "--out", "out"])
+    2
+    """
     args = build_parser().parse_args(argv)
     try:
         args.func(args)

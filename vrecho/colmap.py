@@ -37,7 +37,18 @@ PINHOLE_PARAMS = {"SIMPLE_PINHOLE": 3, "PINHOLE": 4, "SIMPLE_RADIAL": 4, "RADIAL
 
 @dataclass
 class Camera:
-    """A COLMAP camera: ``model``, image ``width`` and ``height`` (pixels), ``params``."""
+    """A COLMAP camera.
+
+    Parameters
+    ----------
+    model : str
+        COLMAP's camera model, one of :data:`PINHOLE_PARAMS`.
+    width, height : int
+        Image size in pixels.
+    params : numpy.ndarray, shape (p,), float
+        The model's parameters in COLMAP's order (focal lengths and principal point in pixels,
+        then distortion), p as :data:`PINHOLE_PARAMS` says.
+    """
 
     model: str
     width: int
@@ -56,7 +67,17 @@ class Camera:
 
 @dataclass
 class Image:
-    """A posed picture: its file ``name``, ``camera_id`` and ``pose`` (4, 4) camera-to-world."""
+    """A posed picture.
+
+    Parameters
+    ----------
+    name : str
+        Its file name, as ``images.txt`` gives it.
+    camera_id : int
+        Id of its :class:`Camera`.
+    pose : numpy.ndarray, shape (4, 4), float64
+        Camera-to-world matrix, OpenCV axes, in the model's units (metres in vrecho's world).
+    """
 
     name: str
     camera_id: int
@@ -71,15 +92,55 @@ def _lines(path: Path) -> list[str]:
 
 
 def quaternion_matrix(q) -> np.ndarray:
-    """Rotation matrix (3, 3) of a quaternion (w, x, y, z), normalised first."""
+    """Rotation matrix of a quaternion (w, x, y, z), normalised first.
+
+    Parameters
+    ----------
+    q : array_like, shape (4,), float
+        The quaternion, scalar first (COLMAP's order); not zero.
+
+    Returns
+    -------
+    numpy.ndarray, shape (3, 3), float64
+        The rotation matrix.
+
+    Examples
+    --------
+    >>> quaternion_matrix([2.0, 0.0, 0.0, 0.0])
+    array([[1., 0., 0.],
+           [0., 1., 0.],
+           [0., 0., 1.]])
+    """
     w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
     return Rotation.from_quat([x, y, z, w]).as_matrix()
 
 
 def read_model(folder: str | Path) -> tuple[dict[int, Camera], list[Image]]:
     """COLMAP's ``cameras.txt`` and ``images.txt`` in ``folder``: the cameras by id, and the
-    images in the file's order. One :class:`VrechoError` for a missing file, a malformed line, an
-    unsupported camera model, or an image of an unknown camera."""
+    images in the file's order.
+
+    Lines starting with ``#`` are comments; in ``images.txt`` only lines of exactly ten fields
+    are read as image headers (points lines are skipped).
+
+    Parameters
+    ----------
+    folder : str or pathlib.Path
+        The folder of COLMAP's text model.
+
+    Returns
+    -------
+    cameras : dict of int to Camera
+        The cameras by id.
+    images : list of Image
+        The images in the file's order, their poses camera-to-world.
+
+    Raises
+    ------
+    VrechoError
+        For a missing file, a malformed line, an unsupported camera model (or a wrong number of
+        its parameters), an image of an unknown camera, an image without a valid pose, or an
+        ``images.txt`` with no image.
+    """
     folder = Path(folder)
     cameras = {}
     for line in _lines(folder / "cameras.txt"):
@@ -122,8 +183,28 @@ def read_model(folder: str | Path) -> tuple[dict[int, Camera], list[Image]]:
 
 
 def write_model(folder: str | Path, camera: Camera, names: list[str], poses: np.ndarray) -> Path:
-    """Write one camera and the images ``names`` at camera-to-world ``poses`` (N, 4, 4) as
-    COLMAP's text model (no 2-D points): how a phone app exports its tracked poses."""
+    """Write one camera and the images ``names`` at camera-to-world ``poses`` as COLMAP's text
+    model (no 2-D points): how a phone app exports its tracked poses.
+
+    The camera gets id 1 and the images ids 1 to N, in order. Existing ``cameras.txt`` and
+    ``images.txt`` are overwritten.
+
+    Parameters
+    ----------
+    folder : str or pathlib.Path
+        The folder to write in; created with its parents if needed.
+    camera : Camera
+        The one camera of every image.
+    names : list of str
+        The images' file names.
+    poses : numpy.ndarray, shape (N, 4, 4), float
+        Camera-to-world matrices, OpenCV axes, metres.
+
+    Returns
+    -------
+    pathlib.Path
+        ``folder``, as a ``Path``.
+    """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "cameras.txt").write_text(
@@ -141,14 +222,52 @@ def write_model(folder: str | Path, camera: Camera, names: list[str], poses: np.
 
 
 def pinhole(K: np.ndarray, width: int, height: int) -> Camera:
-    """The PINHOLE camera of a vrecho intrinsics matrix (pixel centres at integers)."""
+    """The PINHOLE camera of a vrecho intrinsics matrix (pixel centres at integers).
+
+    Parameters
+    ----------
+    K : numpy.ndarray, shape (3, 3), float
+        vrecho's pinhole matrix, in pixels.
+    width, height : int
+        Image size in pixels.
+
+    Returns
+    -------
+    Camera
+        A PINHOLE camera whose :attr:`Camera.intrinsics` give ``K`` back (skew is dropped).
+    """
     return Camera("PINHOLE", width, height, np.array([K[0, 0], K[1, 1], K[0, 2] + 0.5, K[1, 2] + 0.5]))
 
 
 def image_times(names: list[str], fps: float, *, first: int = 1) -> np.ndarray:
     """Each picture's time in the video (s), from the last number in its file name: pictures
     extracted at ``fps`` per second and numbered from ``first`` (``ffmpeg -i capture.mp4 -vf
-    fps=2 images/%06d.png`` numbers from 1 at 2 per second: picture k shows time (k - 1) / 2)."""
+    fps=2 images/%06d.png`` numbers from 1 at 2 per second: picture k shows time (k - 1) / 2).
+
+    Parameters
+    ----------
+    names : list of str
+        The pictures' file names.
+    fps : float
+        Pictures per second of video; positive.
+    first : int
+        Number of the first picture; 1 by default.
+
+    Returns
+    -------
+    numpy.ndarray, shape (len(names),), float64
+        Each picture's time in seconds.
+
+    Raises
+    ------
+    VrechoError
+        If ``fps`` is not positive, or a name holds no number.
+
+    Examples
+    --------
+    >>> image_times(["images/000001.png", "images/000004.png"], 2.0)
+    array([0. , 1.5])
+    """
     if not fps > 0:
         raise VrechoError(f"image-fps: expected a positive rate, got {fps}")
     out = []

@@ -20,8 +20,8 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 
+from .device import MIC_ABOVE_EMITTER_M
 from .errors import VrechoError
-from .scene import MIC_ABOVE_EMITTER_M
 from .signals import FS, SPEED_OF_SOUND, check_fs, parabolic_peaks
 
 N_FFT = 2048
@@ -39,6 +39,25 @@ def check_frames(audio, fs) -> np.ndarray:
 
     Another sample rate is resampled (never silently assumed); a frame of the wrong length,
     or with NaN or infinite samples, is a :class:`VrechoError`.
+
+    Parameters
+    ----------
+    audio : array_like, shape (n,) or (B, n), numbers
+        One frame or a batch of frames, n = round(``fs``) samples each.
+    fs : int
+        Sample rate in Hz.
+
+    Returns
+    -------
+    numpy.ndarray, shape (44100,) or (B, 44100), float32
+        The frames at 44.1 kHz (a copy); resampled frames are cut or zero-padded to exactly
+        44100 samples.
+
+    Raises
+    ------
+    VrechoError
+        If ``fs`` is not a valid sample rate, ``audio`` is not a 1-D or 2-D array of numbers,
+        a frame is not 1 s long, or a sample is NaN or infinite.
     """
     fs = check_fs(fs)
     x = np.asarray(audio)
@@ -67,9 +86,32 @@ def _mel_basis() -> np.ndarray:
 
 
 def check_emitted(emitted, fs, n_frames: int | None = None) -> np.ndarray:
-    """Validate the emitted sound(s) and return them at 44.1 kHz (float32): one sound (k,) for
-    every frame, or, with ``n_frames``, one per frame (n_frames, k). Each must be finite, not
-    silent and at most one frame long; another sample rate is resampled."""
+    """Validate the emitted sound(s) and return them at 44.1 kHz (float32).
+
+    One sound (k,) for every frame, or, with ``n_frames``, one per frame (n_frames, k). Each
+    must be finite, not silent and at most one frame long; another sample rate is resampled.
+
+    Parameters
+    ----------
+    emitted : array_like, shape (k,) or (n_frames, k), numbers
+        The emitted sound(s), at most round(``fs``) samples long.
+    fs : int
+        Sample rate in Hz.
+    n_frames : int, optional
+        Number of frames; only with it is one sound per frame accepted.
+
+    Returns
+    -------
+    numpy.ndarray, shape (k',) or (n_frames, k'), float32
+        The sound(s) at 44.1 kHz (a copy); k' = k unless resampled.
+
+    Raises
+    ------
+    VrechoError
+        If ``fs`` is not a valid sample rate, ``emitted`` has another shape or is not numbers,
+        has NaN or infinite samples, is longer than a 1 s frame, or a sound is silent (all
+        zero).
+    """
     fs = check_fs(fs)
     s = np.asarray(emitted)
     if s.dtype.kind not in "fiu" or s.ndim not in (1, 2) or (s.ndim == 2 and len(s) != n_frames):
@@ -92,15 +134,26 @@ def logmel(audio, fs: int = FS) -> np.ndarray:
 
     Parameters
     ----------
-    audio : array, shape (n,) or (B, n)
-        One or more 1 s frames.
+    audio : array_like, shape (n,) or (B, n), float
+        One or more 1 s frames, n = round(``fs``) samples.
     fs : int
-        Sample rate in Hz (resampled to 44.1 kHz).
+        Sample rate in Hz (resampled to 44.1 kHz); :data:`~vrecho.signals.FS` by default.
 
     Returns
     -------
     numpy.ndarray, shape (62, 25) or (B, 62, 25), float32
         Mel bands (low to high) by time bins; each spectrogram has zero mean and unit variance.
+
+    Raises
+    ------
+    VrechoError
+        For frames :func:`check_frames` refuses.
+
+    Examples
+    --------
+    >>> frame = np.random.default_rng(0).standard_normal(44_100)
+    >>> logmel(frame).shape
+    (62, 25)
     """
     x = check_frames(audio, fs)
     # librosa's centred STFT (zero padding by N_FFT / 2, periodic Hann), framed by hand: the same
@@ -127,20 +180,43 @@ def echo_response(audio, emitted, fs: int = FS, *, length_s: float | None = ECHO
 
     Parameters
     ----------
-    audio : array, shape (n,) or (B, n)
-        1 s frames starting at the pulse onset.
-    emitted : array, shape (k,) or (B, k)
-        The emitted sound at the same rate.
+    audio : array_like, shape (n,) or (B, n), float
+        1 s frames starting at the pulse onset, n = round(``fs``) samples.
+    emitted : array_like, shape (k,) or (B, k), float
+        The emitted sound at the same rate: one for every frame, or one per frame.
     fs : int
         Sample rate of both, in Hz (resampled to 44.1 kHz).
     length_s : float or None
-        Keep the first ``length_s`` seconds (all of it with None).
+        Keep the first ``length_s`` seconds (all of it with None); 30 ms
+        (:data:`ECHO_WINDOW_S`) by default.
     regularization : float
-        Noise floor relative to the sound's strongest bin.
+        Noise floor relative to the sound's strongest bin (power); 1e-3 by default.
 
     Returns
     -------
     numpy.ndarray, shape (..., round(length_s * 44100)), float32
+        The impulse response at 44.1 kHz, sample 0 at emission; (..., 44100) with
+        ``length_s=None``.
+
+    Raises
+    ------
+    VrechoError
+        For frames :func:`check_frames` refuses or sounds :func:`check_emitted` refuses.
+
+    Examples
+    --------
+    A frame holding the probe and one echo of half its amplitude, 300 samples later:
+
+    >>> from vrecho.signals import probe
+    >>> s = probe()
+    >>> x = np.zeros(44_100, np.float32)
+    >>> x[:4410] += s
+    >>> x[300:4710] += 0.5 * s
+    >>> h = echo_response(x, s)
+    >>> h.shape
+    (1323,)
+    >>> int(np.argmax(h[100:])) + 100
+    300
     """
     x = check_frames(audio, fs)
     s = check_emitted(emitted, fs, None if x.ndim == 1 else len(x))
@@ -172,10 +248,14 @@ def _cached_inverse_filter(sound: bytes, n: int, regularization: float) -> np.nd
 class EchoFeatures:
     """Echo features of one or more frames.
 
-    ``envelope``: (..., 1323) Hilbert envelope of the first 30 ms of the estimated impulse
-    response, divided by its direct-sound peak. ``bands``: (..., 7, 20) log energy of the
-    estimated response in the octave bands of :data:`DECAY_BANDS_HZ` over 20 bins of 25 ms
-    (0 to 0.5 s), in dB relative to the strongest cell.
+    Attributes
+    ----------
+    envelope : numpy.ndarray, shape (..., 1323), float32
+        Hilbert envelope of the first 30 ms of the estimated impulse response, divided by its
+        direct-sound peak (the largest value in the first 2 ms).
+    bands : numpy.ndarray, shape (..., 7, 20), float32
+        Log energy of the estimated response in the octave bands of :data:`DECAY_BANDS_HZ` over
+        20 bins of 25 ms (0 to 0.5 s), in dB relative to the strongest cell, floored at -120 dB.
     """
 
     envelope: np.ndarray
@@ -183,7 +263,30 @@ class EchoFeatures:
 
 
 def echo_features(audio, emitted, fs: int = FS) -> EchoFeatures:
-    """:class:`EchoFeatures` of frames whose emitted sound is known."""
+    """:class:`EchoFeatures` of frames whose emitted sound is known.
+
+    Both come from the impulse response of :func:`echo_response` over the whole frame; the
+    band energies from a Hann-windowed FFT of each 25 ms segment.
+
+    Parameters
+    ----------
+    audio : array_like, shape (n,) or (B, n), float
+        1 s frames starting at the pulse onset, n = round(``fs``) samples.
+    emitted : array_like, shape (k,) or (B, k), float
+        The emitted sound at the same rate: one for every frame, or one per frame.
+    fs : int
+        Sample rate of both, in Hz (resampled to 44.1 kHz).
+
+    Returns
+    -------
+    EchoFeatures
+        ``envelope`` (..., 1323) and ``bands`` (..., 7, 20), float32.
+
+    Raises
+    ------
+    VrechoError
+        For frames :func:`check_frames` refuses or sounds :func:`check_emitted` refuses.
+    """
     h = echo_response(audio, emitted, fs, length_s=None)
     early = h[..., :int(round(ECHO_WINDOW_S * FS))]
     env = np.abs(scipy.signal.hilbert(early, axis=-1))
@@ -212,10 +315,45 @@ def echo_at(audio, emitted, depth_m: float, fs: int = FS, *, window_m: float = 0
     for spherical spreading (so 0 dB is a perfect reflector facing a loudspeaker that radiates
     as strongly forward as toward its microphone). An opening leaves 10 dB or more less there.
 
+    Parameters
+    ----------
+    audio : array_like, shape (n,), float
+        One 1 s frame starting at the pulse onset, n = round(``fs``) samples.
+    emitted : array_like, shape (k,), float
+        The emitted sound at the same rate.
+    depth_m : float
+        Expected distance from the emitter to the plane, in metres.
+    fs : int
+        Sample rate of both, in Hz (resampled to 44.1 kHz).
+    window_m : float
+        Half-width of the depth range searched, in metres; 3 cm by default. The range starts
+        no nearer than 5 cm.
+
     Returns
     -------
     level_db : float
+        Level of the echo in dB relative to the direct sound, corrected for spreading.
     depth_m : float
+        Measured distance from the emitter to the plane, in metres.
+
+    Raises
+    ------
+    VrechoError
+        If the searched range lies outside the first 30 ms of the response, or for input
+        :func:`echo_response` refuses.
+
+    Examples
+    --------
+    A frame holding the probe and one echo 300 samples later (a plane 1.166 m away):
+
+    >>> from vrecho.signals import probe
+    >>> s = probe()
+    >>> x = np.zeros(44_100, np.float32)
+    >>> x[:4410] += s
+    >>> x[300:4710] += 0.5 * s
+    >>> level_db, depth_m = echo_at(x, s, 1.2)
+    >>> round(depth_m, 3)
+    1.166
     """
     c = SPEED_OF_SOUND
     h = np.abs(echo_response(audio, emitted, fs, length_s=0.03)).astype(np.float64)

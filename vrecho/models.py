@@ -17,7 +17,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from .scene import MIC_ABOVE_EMITTER_M
+from .device import MIC_ABOVE_EMITTER_M
 from .signals import FS, SPEED_OF_SOUND
 
 DEPTH_BINS_M = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
@@ -39,7 +39,15 @@ IGNORE = -100
 
 
 class AudioBranch(nn.Module):
-    """The paper's audio sub-network: conv 3 x 3, batch normalisation, ReLU, 2 x 2 max-pool, dense."""
+    """The paper's audio sub-network: conv 3 x 3, batch normalisation, ReLU, 2 x 2 max-pool, dense.
+
+    Parameters
+    ----------
+    n_filters : int
+        Number of convolution filters; 16 by default.
+    hidden : int
+        Width of the dense layer (``out_features``); 128 by default.
+    """
 
     def __init__(self, *, n_filters: int = 16, hidden: int = 128):
         super().__init__()
@@ -49,12 +57,32 @@ class AudioBranch(nn.Module):
         self.out_features = hidden
 
     def forward(self, mel: torch.Tensor) -> torch.Tensor:  # (B, 62, 25)
+        """Features of log-mel spectrograms.
+
+        Parameters
+        ----------
+        mel : torch.Tensor, shape (B, 62, 25), float32
+            Normalised log-mel spectrograms (:func:`vrecho.features.logmel`).
+
+        Returns
+        -------
+        torch.Tensor, shape (B, hidden), float32
+            Non-negative features (after ReLU).
+        """
         x = F.max_pool2d(F.relu(self.norm(self.conv(mel[:, None]))), 2)
         return F.relu(self.fc(torch.flatten(x, 1)))
 
 
 class ImageBranch(nn.Module):
-    """Two conv blocks over the 64 x 25 grayscale crop, then dense."""
+    """Two conv blocks over the 64 x 25 grayscale crop, then dense.
+
+    Each block is conv 3 x 3 (16, then 32 filters), batch normalisation, ReLU, 2 x 2 max-pool.
+
+    Parameters
+    ----------
+    hidden : int
+        Width of the dense layer (``out_features``); 128 by default.
+    """
 
     def __init__(self, *, hidden: int = 128):
         super().__init__()
@@ -66,6 +94,18 @@ class ImageBranch(nn.Module):
         self.out_features = hidden
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:  # (B, 64, 25) in [0, 1]
+        """Features of grayscale crops.
+
+        Parameters
+        ----------
+        image : torch.Tensor, shape (B, 64, 25), float32
+            Crops with values in [0, 1].
+
+        Returns
+        -------
+        torch.Tensor, shape (B, hidden), float32
+            Non-negative features (after ReLU).
+        """
         x = F.max_pool2d(F.relu(self.norm1(self.conv1(image[:, None]))), 2)
         x = F.max_pool2d(F.relu(self.norm2(self.conv2(x))), 2)
         return F.relu(self.fc(torch.flatten(x, 1)))
@@ -75,13 +115,32 @@ class EchoBranch(nn.Module):
     """The recovered impulse response, read the way physics says: where is the echo?
 
     Over the log envelope of the first 30 ms (half sample rate after a strided convolution,
-    0.4 cm of depth per step) a stack of dilated residual convolutions scores every delay;
-    a softmax over the delays of the range of interest (past the direct sound) is an attention
-    trained to point at the true echo delay; its peak, refined by a soft-argmax over the
-    neighbouring steps and mapped through the echo geometry (emitter, surface, microphone 7 cm
-    above the emitter), is the depth. What it reads there and the octave-band energy decay
-    (7 x 20) feed the shared layers. The depth thus comes from an echo delay, not from memorised
-    spectra, and carries over to rooms and probes never seen.
+    0.78 cm of depth per step, 0.39 cm per sample before it) a stack of dilated residual
+    convolutions scores every delay; a softmax over the delays of the range of interest (past
+    the direct sound) is an attention trained to point at the true echo delay; its peak, refined
+    by a soft-argmax over the neighbouring steps and mapped through the echo geometry (emitter,
+    surface, microphone 7 cm above the emitter), is the depth. What it reads there and the
+    octave-band energy decay (7 x 20) feed the shared layers. The depth thus comes from an echo
+    delay, not from memorised spectra, and carries over to rooms and probes never seen.
+
+    Parameters
+    ----------
+    hidden : int
+        Width of the echo features' dense layer; the band energies get half of it.
+        ``out_features`` is ``hidden + hidden // 2``. 128 by default.
+    length : int
+        Samples of the envelope (30 ms at 44.1 kHz: 1323 by default); the delay steps number
+        ``length // 2``.
+    channels : int
+        Channels of the convolutions; 24 by default.
+    dilations : tuple of int
+        Dilation of each residual convolution; (1, 2, 4, 8, 16, 32) by default.
+
+    Attributes
+    ----------
+    depth_at : torch.Tensor, shape (length // 2,), float32
+        Emitter-to-plane depth in metres of each delay step; only steps of 0.15 m or more are
+        scored.
     """
 
     REFINE_STEPS = 3
@@ -105,8 +164,24 @@ class EchoBranch(nn.Module):
         self.out_features = hidden + hidden // 2
 
     def forward(self, envelope: torch.Tensor, bands: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Features (B, out_features), depth (B,) in metres, and the delay scores (B, steps), which
-        training holds against the true echo delay (see :func:`vrecho.learn.train.loss_fn`)."""
+        """Features, depth in metres and the delay scores of impulse responses.
+
+        Parameters
+        ----------
+        envelope : torch.Tensor, shape (B, length), float32
+            :attr:`vrecho.features.EchoFeatures.envelope`: the first 30 ms, direct sound 1.
+        bands : torch.Tensor, shape (B, 7, 20), float32
+            :attr:`vrecho.features.EchoFeatures.bands`, in dB.
+
+        Returns
+        -------
+        features : torch.Tensor, shape (B, out_features), float32
+        depth : torch.Tensor, shape (B,), float32
+            Emitter to the surface's plane, in metres.
+        scores : torch.Tensor, shape (B, steps), float32
+            The delay scores (steps = ``length // 2``, -1e4 before 0.15 m), which training holds
+            against the true echo delay (see :func:`vrecho.learn.train.loss_fn`).
+        """
         x = torch.log10(envelope.clamp_min(1e-4))[:, None] / 4.0  # 80 dB of range to [-1, 0]
         h = F.relu(self.stem(x))
         for conv, norm in zip(self.convs, self.norms):
@@ -133,7 +208,20 @@ class SoundNetBranch(nn.Module):
     SoundNet's kernel sizes (64, 32, 16, 8, 4, ...), max-pooling by 8 after the first two, then
     global average and max pooling. ``n_layers`` is 5 or 8; trained from scratch (SoundNet's
     pretrained weights cannot be had offline). A quarter of the sample rate keeps training within
-    minutes per epoch on two cores; the global pooling discards echo timing anyway."""
+    minutes per epoch on two cores; the global pooling discards echo timing anyway.
+
+    Parameters
+    ----------
+    n_layers : {5, 8}
+        Number of convolutions; 8 by default.
+    hidden : int
+        Width of the dense layer (``out_features``); 128 by default.
+
+    Raises
+    ------
+    ValueError
+        If ``n_layers`` is neither 5 nor 8.
+    """
 
     def __init__(self, *, n_layers: int = 8, hidden: int = 128):
         super().__init__()
@@ -148,6 +236,18 @@ class SoundNetBranch(nn.Module):
         self.out_features = hidden
 
     def forward(self, wave: torch.Tensor) -> torch.Tensor:  # (B, 11025)
+        """Features of waveforms, each first scaled to a peak of 1.
+
+        Parameters
+        ----------
+        wave : torch.Tensor, shape (B, 11025), float32
+            1 s frames at 11.025 kHz.
+
+        Returns
+        -------
+        torch.Tensor, shape (B, hidden), float32
+            Non-negative features (after ReLU).
+        """
         x = wave[:, None] / wave.abs().amax(dim=1, keepdim=True)[:, None].clamp_min(1e-6)
         for i, (conv, norm) in enumerate(zip(self.convs, self.norms)):
             x = F.relu(norm(conv(x)))
@@ -158,7 +258,19 @@ class SoundNetBranch(nn.Module):
 
 class MFB(nn.Module):
     """Multi-modal factorised bilinear pooling: z_i = 1^T (U_i^T x o V_i^T y), with k factors
-    per output, then power and L2 normalisation."""
+    per output, then power and L2 normalisation.
+
+    Parameters
+    ----------
+    x_features, y_features : int
+        Widths of the two inputs.
+    out_features : int
+        Width of the output; 128 by default.
+    k : int
+        Factors per output; 5 by default.
+    dropout : float
+        Dropout probability on the products before summing; 0.1 by default.
+    """
 
     def __init__(self, x_features: int, y_features: int, *, out_features: int = 128, k: int = 5, dropout: float = 0.1):
         super().__init__()
@@ -168,6 +280,20 @@ class MFB(nn.Module):
         self.dropout = nn.Dropout(dropout)
 
     def forward(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        """The fused features of two inputs.
+
+        Parameters
+        ----------
+        x : torch.Tensor, shape (B, x_features), float32
+            Features of the first branch.
+        y : torch.Tensor, shape (B, y_features), float32
+            Features of the second branch.
+
+        Returns
+        -------
+        torch.Tensor, shape (B, out_features), float32
+            Signed square roots, scaled to unit L2 norm per row.
+        """
         z = self.dropout(self.u(x) * self.v(y)).view(-1, self.out_features, self.k).sum(dim=2)
         z = torch.sign(z) * torch.sqrt(torch.abs(z) + 1e-8)
         return F.normalize(z, dim=1)
@@ -183,15 +309,35 @@ class EchoCNN(nn.Module):
     ----------
     inputs : tuple of {"mel", "image", "echo", "wave"}
         ``("mel",)``: EchoCNN-A; ``("mel", "image")``: EchoCNN-AV; ``("echo",)``: EchoCNN-E
-        (emitted sound known); ``("image",)``: the visual-only baseline; ``("wave",)``: the
-        SoundNet-style baseline.
+        (emitted sound known); ``("echo", "image")``: EchoCNN-EV; ``("image",)``: the
+        visual-only baseline; ``("wave",)``: the SoundNet-style baseline. ``("mel",)`` by
+        default.
     fusion : {"concat", "mfb"}
-        How two branches meet (ignored with one).
+        How two branches meet (ignored with one; "mfb" only with exactly two); "concat" by
+        default.
     hidden : int
-        Width of each branch's dense layer and of the shared dense layer.
+        Width of each branch's dense layer and of the shared dense layer; 128 by default.
     dropout : float
+        Dropout probability before and after the shared dense layer; 0.3 by default.
     wave_layers : {5, 8}
-        Depth of the SoundNet branch.
+        Depth of the SoundNet branch; 8 by default.
+
+    Attributes
+    ----------
+    config : dict
+        The parameters above, as checkpoints store them (see :func:`build`).
+
+    Raises
+    ------
+    ValueError
+        If ``inputs`` is empty or names an unknown input, or ``fusion`` is unknown.
+
+    Examples
+    --------
+    >>> model = EchoCNN(("mel",)).eval()
+    >>> out = model({"mel": torch.zeros(2, 62, 25)})
+    >>> out["open"].shape, out["depth_m"].shape
+    (torch.Size([2, 2]), torch.Size([2]))
     """
 
     def __init__(self, inputs: tuple[str, ...] = ("mel",), *, fusion: str = "concat", hidden: int = 128,
@@ -226,6 +372,27 @@ class EchoCNN(nn.Module):
         self.register_buffer("depth_ft", torch.tensor(DEPTH_FT_M), persistent=False)
 
     def forward(self, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """Every head's output for a batch.
+
+        With the echo branch, ``depth_m`` is the echo delay it reads plus a correction of at most
+        5 cm, and the depth classes are scored by the distance of that depth to each class's
+        centre.
+
+        Parameters
+        ----------
+        batch : dict of str to torch.Tensor
+            The variant's inputs, float32: ``mel`` (B, 62, 25), ``image`` (B, 64, 25) in
+            [0, 1], ``envelope`` (B, 1323) and ``bands`` (B, 7, 20) for ``echo``, ``wave``
+            (B, 11025). Other keys are ignored.
+
+        Returns
+        -------
+        dict of str to torch.Tensor
+            Class scores (logits) per head of :data:`HEADS`, (B, size): ``open``, ``material``,
+            ``depth_bin``, ``depth_ft``, ``src_cell``; ``depth_m`` (B,) and ``src_m`` (B, 3) in
+            metres. With the echo branch also ``delay_scores`` (B, 661) and ``depth_at`` (661,),
+            in metres (see :class:`EchoBranch`).
+        """
         feats, echo_depth = [], None
         for name, branch in self.branches.items():
             if name == "echo":
@@ -252,7 +419,19 @@ class EchoCNN(nn.Module):
 
 
 def build(config: dict) -> EchoCNN:
-    """An EchoCNN from its ``config`` (as stored in checkpoints)."""
+    """An EchoCNN from its ``config`` (as stored in checkpoints).
+
+    Parameters
+    ----------
+    config : dict
+        :attr:`EchoCNN.config`: ``inputs``, ``fusion``, ``hidden``, ``dropout`` and, optionally,
+        ``wave_layers`` (8 when absent).
+
+    Returns
+    -------
+    EchoCNN
+        A new model with fresh weights (load a state dict into it).
+    """
     return EchoCNN(tuple(config["inputs"]), fusion=config["fusion"], hidden=config["hidden"], dropout=config["dropout"],
                    wave_layers=config.get("wave_layers", 8))
 
@@ -267,12 +446,18 @@ class FeatureBaseline:
     Parameters
     ----------
     kind : {"knn", "svm"}
+        k nearest neighbours or a linear SVM; "knn" by default.
     inputs : tuple of {"mel", "image", "envelope", "bands"}
-        Input arrays to flatten and concatenate.
+        Input arrays to flatten and concatenate; ``("mel",)`` by default.
     n_neighbors : int
-        For kNN.
+        For kNN; 5 by default.
     C : float
-        Inverse regularisation, for the SVM.
+        Inverse regularisation, for the SVM; 0.1 by default.
+
+    Raises
+    ------
+    ValueError
+        If ``kind`` is neither "knn" nor "svm".
     """
 
     def __init__(self, kind: str = "knn", inputs: tuple[str, ...] = ("mel",), *, n_neighbors: int = 5, C: float = 0.1):
@@ -286,7 +471,10 @@ class FeatureBaseline:
     def _estimator(self, regression: bool):
         # scikit-learn is heavy (1.7 s to import): only the baselines need it
         from sklearn.multioutput import MultiOutputRegressor  # heavy (1.7 s to import): only the baselines need it
-        from sklearn.neighbors import KNeighborsClassifier, KNeighborsRegressor  # heavy (1.7 s to import): only the baselines need it
+        from sklearn.neighbors import (  # heavy (1.7 s to import): only the baselines need it
+            KNeighborsClassifier,
+            KNeighborsRegressor,
+        )
         from sklearn.svm import LinearSVC, LinearSVR  # heavy (1.7 s to import): only the baselines need it
 
         if self.kind == "knn":
@@ -297,6 +485,26 @@ class FeatureBaseline:
         return LinearSVC(C=self.C, dual=False)
 
     def fit(self, x: dict, y: dict) -> "FeatureBaseline":
+        """Fit one standardised estimator per head, each on the rows where that head applies.
+
+        A class head with a single class in its rows gets a most-frequent dummy; a head with no
+        rows gets no estimator (:meth:`predict` then answers zeros for it).
+
+        Parameters
+        ----------
+        x : dict of str to numpy.ndarray
+            The arrays of ``inputs``, each (N, ...).
+        y : dict of str to numpy.ndarray
+            Targets: ``open``, ``material``, ``depth_bin``, ``depth_ft`` (N,) int, :data:`IGNORE`
+            where a head does not apply; ``depth_m`` (N,) in metres, used where finite and the
+            surface is closed (``open`` 0); ``src_m`` (N, 3) in metres, used in rows without
+            NaN, with ``src_cell`` (N, 3) int, the grid cell per axis.
+
+        Returns
+        -------
+        FeatureBaseline
+            Itself, fitted (``models_``).
+        """
         # scikit-learn is heavy (1.7 s to import): only the baselines need it
         from sklearn.dummy import DummyClassifier  # heavy (1.7 s to import): only the baselines need it
         from sklearn.pipeline import make_pipeline  # heavy (1.7 s to import): only the baselines need it
@@ -326,6 +534,20 @@ class FeatureBaseline:
         return self
 
     def predict(self, x: dict) -> dict:
+        """Scores shaped like EchoCNN's outputs.
+
+        Parameters
+        ----------
+        x : dict of str to numpy.ndarray
+            The arrays of ``inputs``, each (N, ...).
+
+        Returns
+        -------
+        dict of str to torch.Tensor
+            One-hot class scores (N, size) float32 per class head of :data:`CLASS_HEADS` and
+            ``src_cell`` (N, 60) (one block per axis); ``depth_m`` (N,) and ``src_m`` (N, 3) in
+            metres. A head fitted on no rows answers zeros (class 0 for a class head).
+        """
         X = self._features(x)
         n = len(X)
 

@@ -37,7 +37,23 @@ SPEED_OF_SOUND = 343.0
 
 
 def check_fs(fs) -> int:
-    """Validate a sample rate in Hz and return it as an int."""
+    """Validate a sample rate in Hz and return it as an int.
+
+    Parameters
+    ----------
+    fs : int or float
+        Sample rate in Hz: a positive whole number (``44100.0`` is accepted), not a bool.
+
+    Returns
+    -------
+    int
+        The sample rate in Hz.
+
+    Raises
+    ------
+    VrechoError
+        If ``fs`` is not a finite positive whole number, or is below 8000 Hz.
+    """
     if isinstance(fs, bool) or not isinstance(fs, (int, np.integer, float)) or not np.isfinite(fs) \
             or fs <= 0 or float(fs) != int(fs):
         raise VrechoError(f"fs: sample rate must be a positive whole number of hertz, got {fs!r}")
@@ -68,7 +84,24 @@ def _colored_noise(n: int, exponent: float, rng: np.random.Generator) -> np.ndar
 
 
 def colored_noise(n: int, exponent: float, rng: np.random.Generator) -> np.ndarray:
-    """Unit-RMS noise of ``n`` samples with a 1/f**exponent power spectrum (float64)."""
+    """Unit-RMS noise of ``n`` samples with a 1/f**exponent power spectrum (float64).
+
+    Shaped in the frequency domain, with the DC bin set to zero.
+
+    Parameters
+    ----------
+    n : int
+        Number of samples.
+    exponent : float
+        Slope of the power spectral density: 0 white, 1 pink, 2 brown.
+    rng : numpy.random.Generator
+        Source of the noise.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,), float64
+        Noise with an RMS of 1.
+    """
     x = _colored_noise(n, exponent, rng)
     return x / np.sqrt(np.mean(x ** 2))
 
@@ -117,19 +150,36 @@ def _whistle(t: np.ndarray, fs: int, rng: np.random.Generator) -> np.ndarray:
 def emitted_sound(name: str, fs: int = FS, rng: np.random.Generator | None = None) -> np.ndarray:
     """One 100 ms emitted sound of PROTOCOL.md.
 
+    Tones start at a random phase; the chirp sweeps linearly from 440 to 1320 Hz.
+
     Parameters
     ----------
     name : str
         One of :data:`SOUNDS`.
     fs : int
-        Sample rate in Hz.
+        Sample rate in Hz; :data:`FS` (44.1 kHz) by default.
     rng : numpy.random.Generator, optional
-        Source of the random parts (noises, clap, voice, whistle); a fixed default when omitted.
+        Source of the random parts (noises, clap, voice, whistle, a tone's phase); a fixed
+        default (seed 0) when omitted.
 
     Returns
     -------
     numpy.ndarray, shape (round(0.1 * fs),), float32
         Peak amplitude 0.8, with 5 ms fades.
+
+    Raises
+    ------
+    VrechoError
+        If ``name`` is not one of :data:`SOUNDS`, ``fs`` is not a valid sample rate, or a tone
+        lies at or above half of ``fs``.
+
+    Examples
+    --------
+    >>> x = emitted_sound("tone_1000", rng=np.random.default_rng(1))
+    >>> x.shape, x.dtype
+    ((4410,), dtype('float32'))
+    >>> round(float(np.abs(x).max()), 3)
+    0.8
     """
     fs = check_fs(fs)
     if name not in SOUNDS:
@@ -161,7 +211,30 @@ def probe(fs: int = FS, *, f_lo: float = 200.0, f_hi: float = 18_000.0) -> np.nd
 
     Broadband, so echo delays can be read to a fraction of a sample by deconvolution, and
     logarithmic, so the low bands where glass and mirror differ get as much energy as the highs.
-    Peak 0.8, 5 ms fades.
+
+    Parameters
+    ----------
+    fs : int
+        Sample rate in Hz; :data:`FS` (44.1 kHz) by default.
+    f_lo : float
+        Start frequency of the sweep in Hz; 200 Hz by default.
+    f_hi : float
+        End frequency of the sweep in Hz; 18 kHz by default, and at most 0.45 * ``fs``.
+
+    Returns
+    -------
+    numpy.ndarray, shape (round(0.1 * fs),), float32
+        Peak amplitude 0.8, with 5 ms fades.
+
+    Raises
+    ------
+    VrechoError
+        If ``fs`` is not a valid sample rate.
+
+    Examples
+    --------
+    >>> probe().shape
+    (4410,)
     """
     fs = check_fs(fs)
     f_hi = min(f_hi, 0.45 * fs)
@@ -170,9 +243,30 @@ def probe(fs: int = FS, *, f_lo: float = 200.0, f_hi: float = 18_000.0) -> np.nd
 
 
 def random_probe(rng: np.random.Generator, fs: int = FS) -> np.ndarray:
-    """A random broadband probe of the kind PROTOCOL.md's product protocol must accept: 100 ms
-    spanning at least 200 Hz to 16 kHz, peak 0.8 with fades. A linear or logarithmic sweep (either
-    direction) or a band-limited noise burst, with random band edges."""
+    """A random broadband probe of the kind PROTOCOL.md's product protocol must accept.
+
+    100 ms spanning at least 200 Hz to 16 kHz, peak 0.8 with fades. A linear or logarithmic
+    sweep (either direction) or a band-limited noise burst, with random band edges: the lower
+    drawn from 60 to 200 Hz, the upper from 16 kHz to min(20 kHz, 0.45 * ``fs``).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of the kind, the band edges, the direction and the noise.
+    fs : int
+        Sample rate in Hz; :data:`FS` (44.1 kHz) by default. The band reaches 16 kHz only
+        where 0.45 * ``fs`` does (``fs`` of about 35.6 kHz or more).
+
+    Returns
+    -------
+    numpy.ndarray, shape (round(0.1 * fs),), float32
+        Peak amplitude 0.8, with 5 ms fades.
+
+    Raises
+    ------
+    VrechoError
+        If ``fs`` is not a valid sample rate.
+    """
     fs = check_fs(fs)
     n = int(round(PULSE_S * fs))
     t = np.arange(n) / fs
@@ -188,7 +282,33 @@ def random_probe(rng: np.random.Generator, fs: int = FS) -> np.ndarray:
 
 
 def pulse_train(sound: np.ndarray, n_periods: int, fs: int = FS) -> np.ndarray:
-    """The emitter's signal: ``sound`` at the start of each 1 s period, silence in between."""
+    """The emitter's signal: ``sound`` at the start of each 1 s period, silence in between.
+
+    Parameters
+    ----------
+    sound : array_like, shape (k,), float
+        The emitted sound, at most one period (``round(fs)`` samples) long.
+    n_periods : int
+        Number of 1 s periods, at least 1.
+    fs : int
+        Sample rate in Hz; :data:`FS` (44.1 kHz) by default.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_periods * round(fs),), float32
+        The pulse train.
+
+    Raises
+    ------
+    VrechoError
+        If ``fs`` is not a valid sample rate, ``sound`` is not 1-D or is longer than a period,
+        or ``n_periods`` is below 1.
+
+    Examples
+    --------
+    >>> pulse_train(probe(), 3).shape
+    (132300,)
+    """
     fs = check_fs(fs)
     sound = np.asarray(sound, dtype=np.float32)
     period = int(round(PERIOD_S * fs))
@@ -203,19 +323,49 @@ def pulse_train(sound: np.ndarray, n_periods: int, fs: int = FS) -> np.ndarray:
 
 
 def analytic_filter(sound: np.ndarray, n: int) -> np.ndarray:
-    """The matched filter of ``sound`` for an FFT of ``n``, made analytic: its conjugate spectrum
-    (n // 2 + 1 bins) doubled on the positive frequencies, so that one inverse FFT of a
-    recording's spectrum times it (:func:`analytic_envelope`) gives the correlation and its
-    Hilbert pair at once."""
+    """The matched filter of ``sound`` for an FFT of ``n``, made analytic.
+
+    Its conjugate spectrum (n // 2 + 1 bins) doubled on the positive frequencies, so that one
+    inverse FFT of a recording's spectrum times it (:func:`analytic_envelope`) gives the
+    correlation and its Hilbert pair at once.
+
+    Parameters
+    ----------
+    sound : numpy.ndarray, shape (k,), float
+        The emitted sound; k <= ``n``.
+    n : int
+        FFT length in samples.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n // 2 + 1,), complex
+        The kernel; single precision for a single-precision ``sound``.
+    """
     half = np.conj(fft.rfft(sound, n))
     half[1:(n + 1) // 2] *= 2.0
     return half
 
 
 def analytic_envelope(x: np.ndarray, kernel: np.ndarray, n: int) -> np.ndarray:
-    """Envelope (n,) of ``x`` correlated with the sound behind ``kernel`` (:func:`analytic_filter`
-    for the same ``n``, at least len(x) + the sound's length): at lag ``l``, how much of the
-    sound starts at sample ``l``. Single-precision inputs give a single-precision answer."""
+    """Envelope of ``x`` correlated with the sound behind ``kernel``.
+
+    At lag ``l``, how much of the sound starts at sample ``l``. Single-precision inputs give a
+    single-precision answer.
+
+    Parameters
+    ----------
+    x : numpy.ndarray, shape (m,), float
+        The recording.
+    kernel : numpy.ndarray, shape (n // 2 + 1,), complex
+        :func:`analytic_filter` of the sound for the same ``n``.
+    n : int
+        FFT length in samples, at least len(x) + the sound's length.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,), float
+        The envelope by lag in samples.
+    """
     half = fft.rfft(x, n) * kernel
     spec = np.zeros(n, half.dtype)
     spec[:half.size] = half
@@ -223,8 +373,28 @@ def analytic_envelope(x: np.ndarray, kernel: np.ndarray, n: int) -> np.ndarray:
 
 
 def parabolic_peaks(y: np.ndarray, i: np.ndarray) -> np.ndarray:
-    """Peaks' positions to a fraction of a sample (a parabola through three samples; a peak at
-    either end of ``y`` stays where it is)."""
+    """Peaks' positions to a fraction of a sample, by a parabola through three samples.
+
+    A peak at either end of ``y``, or where the three samples do not bend down, stays where it
+    is.
+
+    Parameters
+    ----------
+    y : numpy.ndarray, shape (n,), float
+        The signal.
+    i : array_like, shape (m,), int
+        Sample indices of the peaks.
+
+    Returns
+    -------
+    numpy.ndarray, shape (m,), float64
+        Refined positions, in samples.
+
+    Examples
+    --------
+    >>> parabolic_peaks(np.array([0.0, 1.0, 3.0, 2.0, 0.0]), [2])
+    array([2.16666667])
+    """
     i = np.asarray(i)
     if i.size <= 32:  # a few peaks (the headset's every pulse): plain floats beat a dozen array calls
         last = len(y) - 1

@@ -20,7 +20,7 @@ FIELDS = ("frame", "time_s", "x_m", "y_m", "z_m", "hole", "model", "open", "mate
 
 def capture(out: str | Path, video=None, audio=None, images=None, poses=None, mesh=None, *,
             image_fps: float | None = None, labels: str = "echocnn", emitter_distance_m: float | None = None,
-            classifier=None, progress: bool = False) -> dict:
+            classifier=None) -> dict:
     """``vrecho capture``: a phone's capture in, EchoCNN's answers (and a repaired scan) out.
 
     The pulses of the recording (a video's sound, or ``audio``) are found and cut into frames,
@@ -41,15 +41,47 @@ def capture(out: str | Path, video=None, audio=None, images=None, poses=None, me
     7 cm; a second phone held elsewhere, measured), which places each frame's start, the
     emission, before the direct sound's arrival. Every input is checked before ``out`` is made.
 
+    Parameters
+    ----------
+    out : str or path
+        Output folder; created if missing.
+    video : path, optional
+        A video with its sound (MP4, MOV, MKV); give it or ``audio``, not both.
+    audio : path, optional
+        A sound file (WAV, FLAC) instead of a video.
+    images : path, optional
+        With ``audio``: a folder of the capture's pictures, numbered in order.
+    poses : path, optional
+        A folder with COLMAP's text model of the pictures; with ``mesh``.
+    mesh : path, optional
+        With ``poses``: the scan's mesh (.ply or .obj) to repair.
+    image_fps : float, optional
+        The rate in pictures per second the pictures were extracted at; needed by ``images``
+        and ``poses``.
+    labels : {"echocnn", "echocnn-only"}
+        Who decides what each hole is (default ``echocnn``).
+    emitter_distance_m : float, optional
+        Metres from the loudspeaker to the microphone, 0 to 3 (default 0.07).
+    classifier : Classifier, optional
+        The EchoCNN to ask (default: the shipped weights, :func:`vrecho.load_classifier`).
+
     Returns
     -------
     dict
-        ``{"rows": [...], "result": Reconstruction or None}``.
+        ``{"rows": [...], "result": Reconstruction or None}``: one dict per frame (the columns of
+        :data:`FIELDS`), and the repair of a posed capture.
+
+    Raises
+    ------
+    VrechoError
+        For inputs that do not go together (a video and a sound file, ``poses`` without
+        ``mesh``, pictures without ``image_fps``, ...), unknown ``labels``, an emitter distance
+        outside 0 to 3 m, a file that cannot be read, or an ``out`` that cannot be written.
     """
     rec = open_capture(video, audio, images, poses, mesh, image_fps=image_fps, labels=labels,
                        emitter_distance_m=emitter_distance_m)
     out = ensure_writable_dir(out)
-    found = analyse(rec, classifier=classifier, progress=progress)
+    found = analyse(rec, classifier=classifier)
     rows, result = found.rows, found.result
     if result is not None:
         write(result, out, save_scan=True)

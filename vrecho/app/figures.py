@@ -16,7 +16,22 @@ from ..reconstruct import Reconstruction
 
 def render_mesh(mesh, pose: np.ndarray, *, camera: Camera = Camera()) -> np.ndarray:
     """An RGB picture (H, W, 3) in [0, 1] of an open3d triangle mesh from a camera-to-world
-    ``pose``: vertex colours, lit from the camera (headless: ray casting, no OpenGL)."""
+    ``pose``: vertex colours, lit from the camera (headless: ray casting, no OpenGL).
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh
+        Grey (0.7) where it has no vertex colours.
+    pose : numpy.ndarray, shape (4, 4)
+        Camera-to-world, OpenCV axes, metres (:func:`vrecho.camera.camera_pose`).
+    camera : Camera
+        Image size and field of view (default 320 x 240 pixels, 65 degrees).
+
+    Returns
+    -------
+    numpy.ndarray, shape (H, W, 3), float
+        White where no triangle is hit.
+    """
     import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 
     rc = o3d.t.geometry.RaycastingScene()
@@ -40,7 +55,20 @@ def render_mesh(mesh, pose: np.ndarray, *, camera: Camera = Camera()) -> np.ndar
 
 def before_after(result: Reconstruction, path: str | Path) -> Path:
     """A figure of the initial and the repaired mesh from two viewpoints (over the shoulder of
-    the walkthrough, and from above), side by side."""
+    the walkthrough, and from above), side by side.
+
+    Parameters
+    ----------
+    result : Reconstruction
+        A repair (:func:`vrecho.reconstruct.reconstruct`).
+    path : str or path
+        The PNG to write.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     import matplotlib  # heavy (0.8 s to import): only figures need it
 
     matplotlib.use("Agg")
@@ -71,13 +99,45 @@ def before_after(result: Reconstruction, path: str | Path) -> Path:
 
 
 def below(mesh, z_max: float):
-    """A copy of a mesh without the triangles above ``z_max`` (the ceiling, for a view from above)."""
+    """A copy of a mesh without the triangles above ``z_max`` (the ceiling, for a view from above).
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh
+        Left as it is.
+    z_max : float
+        Height in metres; a triangle with a vertex above it goes.
+
+    Returns
+    -------
+    open3d.geometry.TriangleMesh
+    """
     out = copy.deepcopy(mesh)
     out.remove_triangles_by_mask(np.asarray(mesh.vertices)[np.asarray(mesh.triangles)][:, :, 2].max(axis=1) > z_max)
     return out
 
 
 def capture_figure(x, fs, onsets: Onsets, rows: list[dict], path, decisions=None) -> None:
+    """``capture.png``: a capture's recording with the pulses found (and those missing), and
+    EchoCNN's answer for each frame against time.
+
+    Parameters
+    ----------
+    x : numpy.ndarray, shape (n,)
+        The recording.
+    fs : int
+        Its sample rate in Hz.
+    onsets : Onsets
+        The pulses found (:func:`vrecho.capture.onsets.find_onsets`).
+    rows : list of dict
+        One per frame, ``frames.csv``'s columns (``time_s``, ``open``, ``p_open``, ``depth_m``;
+        ``hole`` for a posed capture).
+    path : str or path
+        The PNG to write.
+    decisions : list of Decision, optional
+        A posed capture's decisions, one per hole: the frames are then coloured by the hole they
+        face.
+    """
     import matplotlib  # heavy (0.8 s to import): only figures need it
 
     matplotlib.use("Agg")

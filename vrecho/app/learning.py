@@ -11,7 +11,34 @@ from ..learn.datasets import open_dataset
 
 def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: int | None = None, cache=None,
              progress: bool = True) -> Path:
-    """``vrecho generate``: :func:`vrecho.learn.datasets.generate` (resumable), then what was made."""
+    """``vrecho generate``: :func:`vrecho.learn.datasets.generate` (resumable), then what was made.
+
+    Parameters
+    ----------
+    out : str or path
+        Dataset folder; created if missing, and it must be empty or this dataset.
+    preset : {"tiny", "default"}
+        Dataset size (default ``tiny``).
+    seed : int
+        Everything follows from it (default 0).
+    workers : int, optional
+        Processes (default: one per core).
+    cache : path, optional
+        Impulse-response cache folder (default ``~/.cache/vrecho/ir``).
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    pathlib.Path
+        The dataset folder.
+
+    Raises
+    ------
+    VrechoError
+        For an unknown preset, a negative seed, fewer than 1 worker, or an ``out`` that cannot be
+        written or holds something else.
+    """
     out = generate_dataset(out, preset=preset, seed=seed, workers=workers, cache=cache, progress=progress)
     ds = open_dataset(out)
     m = ds.manifest
@@ -25,7 +52,35 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
 def train(data: str | Path, out: str | Path, *, methods=None, seed: int = 0, epochs: int = 40, patience: int = 6,
           progress: bool = True) -> dict[str, dict]:
     """``vrecho train``: :func:`vrecho.learn.evaluate.train_methods` (resumable), then each
-    method's record; ``out/classifier.pt`` once the shipped methods are trained."""
+    method's record; ``out/classifier.pt`` once the shipped methods are trained.
+
+    Parameters
+    ----------
+    data : str or path
+        The dataset folder.
+    out : str or path
+        The run folder for checkpoints and models.
+    methods : list of str, optional
+        Train only these methods (default: all).
+    seed : int
+        Random seed (default 0).
+    epochs : int
+        Most epochs per model (default 40).
+    patience : int
+        Epochs without improvement before stopping (default 6).
+    progress : bool
+        Show progress bars.
+
+    Returns
+    -------
+    dict of str to dict
+        Each method's training record (:func:`vrecho.learn.evaluate.train_methods`).
+
+    Raises
+    ------
+    VrechoError
+        As :func:`vrecho.learn.evaluate.train_methods` does.
+    """
     from ..learn.evaluate import train_methods  # torch-bound (1.7 s): only when training
 
     records = train_methods(data, out, methods=methods, seed=seed, epochs=epochs, patience=patience, progress=progress)
@@ -40,7 +95,33 @@ def train(data: str | Path, out: str | Path, *, methods=None, seed: int = 0, epo
 def evaluate(data: str | Path, run: str | Path, out: str | Path | None = None, *, methods=None, seed: int = 0,
              progress: bool = True) -> dict[str, dict]:
     """``vrecho evaluate``: :func:`vrecho.learn.evaluate.evaluate` into ``out`` (``run/evaluation``
-    by default), then its tables."""
+    by default), then its tables.
+
+    Parameters
+    ----------
+    data : str or path
+        The dataset folder.
+    run : str or path
+        The run folder written by ``vrecho train``.
+    out : str or path, optional
+        Output folder (default ``run/evaluation``).
+    methods : list of str, optional
+        Evaluate only these methods (default: every trained one).
+    seed : int
+        Seed of the product protocol's probes (default 0).
+    progress : bool
+        Show progress bars.
+
+    Returns
+    -------
+    dict of str to dict
+        Each method's metrics (:func:`vrecho.learn.evaluate.evaluate`).
+
+    Raises
+    ------
+    VrechoError
+        As :func:`vrecho.learn.evaluate.evaluate` does.
+    """
     from ..learn.evaluate import evaluate as evaluate_methods  # torch-bound (1.7 s): only when judging
 
     out = Path(run) / "evaluation" if out is None else Path(out)

@@ -25,9 +25,20 @@ the scene's scan, ``hear(views, frames) -> Echoes`` and the truth (``scene``, ``
 
 @dataclass
 class Source:
-    """A scan to reconstruct: ``scan``; ``hear``, what the device hears at frames the scan holds no
-    recordings of (a simulated scene's; None for a user's scan: its ``echoes.npz`` is all there
-    is); ``truth``, the simulator's truth of a scene (None for a user's scan)."""
+    """A scan to reconstruct.
+
+    Attributes
+    ----------
+    scan : Scan
+        The frames and the initial mesh.
+    hear : callable, optional
+        ``hear(views, frames) -> Echoes``: what the device hears at frames the scan holds no
+        recordings of (a simulated scene's; None for a user's scan: its ``echoes.npz`` is all
+        there is).
+    truth : object, optional
+        The simulator's truth of a scene (None for a user's scan): ``scene``, ``oracle()``,
+        ``score(initial, repaired)``, ``captures(rng)``.
+    """
 
     scan: Scan
     hear: Callable[[list, object], Echoes] | None = None
@@ -35,6 +46,7 @@ class Source:
 
     @property
     def scene(self) -> Scene | None:
+        """The simulated scene (None for a user's scan)."""
         return None if self.truth is None else self.truth.scene
 
 
@@ -42,7 +54,30 @@ def resolve(source: str | Path) -> Scene | Path:
     """What the command line names, checked before any work: ``builtin`` (the living room) or a
     scene JSON file gives its :class:`~vrecho.scene.Scene`; a folder is a user's scan
     (:func:`~vrecho.reconstruct.load_scan`), or a folder with one in ``scan/`` (what ``vrecho
-    capture --poses`` writes)."""
+    capture --poses`` writes). A folder's contents are not read here: :func:`open_source` reads
+    them.
+
+    Parameters
+    ----------
+    source : str or path
+        ``builtin``, a scene JSON file or a folder.
+
+    Returns
+    -------
+    Scene or pathlib.Path
+        The scene, or the scan folder (``source``, or ``source/scan`` where only that holds a
+        ``frames.npz``).
+
+    Raises
+    ------
+    VrechoError
+        When ``source`` is none of these, or its scene JSON is not valid.
+
+    Examples
+    --------
+    >>> resolve("builtin").name
+    'living_room'
+    """
     source = Path(source)
     if str(source) == "builtin":
         return builtin_scene()
@@ -55,7 +90,19 @@ def resolve(source: str | Path) -> Scene | Path:
 
 
 def simulator() -> Callable:
-    """The installed simulator's entry point (vrecho's own when there are several)."""
+    """The installed simulator's entry point (vrecho's own when there are several).
+
+    Returns
+    -------
+    callable
+        ``simulate(scene, *, n_frames, seed, progress) -> (scan, hear, truth)`` (see
+        :data:`SIMULATORS`).
+
+    Raises
+    ------
+    VrechoError
+        When no simulator is installed.
+    """
     found = sorted(metadata.entry_points(group=SIMULATORS), key=lambda e: e.name != "vrecho")
     if not found:
         raise VrechoError(f"scene: no simulator is installed (entry point group {SIMULATORS!r}); "
@@ -65,9 +112,31 @@ def simulator() -> Callable:
 
 def open_source(source: str | Path | Scene, *, n_frames: int = 60, seed: int = 0, progress: bool = False) -> Source:
     """The scan of a source (see :func:`resolve`; a scene is scanned by the simulator with
-    ``n_frames`` walkthrough frames, its recordings drawn from ``seed``)."""
-    if n_frames < 2:
-        raise VrechoError(f"frames: expected at least 2, got {n_frames}")
+    ``n_frames`` walkthrough frames, its recordings drawn from ``seed``).
+
+    Parameters
+    ----------
+    source : str, path or Scene
+        As for :func:`resolve`, or what it returned.
+    n_frames : int
+        Walkthrough frames of a scene's simulated scan (default 60, at least 2: the simulator
+        says so).
+    seed : int
+        Seed of a scene's simulated recordings.
+    progress : bool
+        Show progress bars (default False).
+
+    Returns
+    -------
+    Source
+        A scan folder's with ``hear`` and ``truth`` None; a scene's with both.
+
+    Raises
+    ------
+    VrechoError
+        For a source :func:`resolve` refuses, a scan folder that cannot be read, or, for a
+        scene, no simulator installed or fewer than 2 frames.
+    """
     if not isinstance(source, Scene):
         source = resolve(source)
     if isinstance(source, Path):

@@ -18,9 +18,29 @@ from ..errors import VrechoError
 def read_video(path) -> tuple[np.ndarray, int, np.ndarray]:
     """A video's sound and the times of its pictures, decoded with PyAV (FFmpeg's libraries).
 
-    Returns the first audio stream mixed to mono (float32, its own rate), the rate (Hz), and
-    each video frame's presentation time (s, from the audio's start). One :class:`VrechoError`
-    for a file that is not a video, a codec FFmpeg cannot decode, or a video without sound."""
+    Only the sound is decoded; the pictures' times come from their packets.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The video (MP4, MOV, MKV, ...).
+
+    Returns
+    -------
+    audio : numpy.ndarray [shape=(n,)], float32
+        The first audio stream mixed to mono, at its own rate (integer samples scaled to
+        [-1, 1]).
+    fs : int
+        Its sample rate in Hz.
+    times : numpy.ndarray [shape=(F,)], float
+        Each video frame's presentation time in seconds from the audio's start, sorted.
+
+    Raises
+    ------
+    VrechoError
+        One error for a file that is not a video, a codec FFmpeg cannot decode, or a video
+        without sound (no audio track, or one holding no samples).
+    """
     import av  # FFmpeg's libraries: only when a video is read or written
 
     path = str(path)
@@ -59,9 +79,30 @@ def read_video(path) -> tuple[np.ndarray, int, np.ndarray]:
 
 
 def video_images(path, times_s, *, width: int | None = None) -> np.ndarray:
-    """Grayscale pictures (K, H, W) uint8 of a video at the given times (s from the sound's start;
-    the picture shown then: the last one that started), decoded in one pass (FFmpeg's threads),
-    scaled to ``width`` pixels across (aspect kept) if given."""
+    """Grayscale pictures of a video at the given times, decoded in one pass (FFmpeg's threads).
+
+    At each time, the picture shown then: the last one that started (the first picture before
+    it, the last picture after the end).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The video.
+    times_s : numpy.ndarray [shape=(K,)], float
+        The times in seconds from the sound's start, in any order.
+    width : int, optional
+        Width in pixels to scale the pictures to (aspect kept); their own size by default.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(K, H, W)], uint8
+        One picture per time, in the order of ``times_s``.
+
+    Raises
+    ------
+    VrechoError
+        For a file FFmpeg cannot decode, or one without pictures.
+    """
     import av  # FFmpeg's libraries: only when a video is read or written
 
     times_s = np.asarray(times_s, float)
@@ -100,10 +141,28 @@ def _pictures(container, times_s: np.ndarray, width: int | None) -> np.ndarray:
 
 def write_video(path, gray: np.ndarray, fps: float, audio: np.ndarray, fs: int, *, audio_codec: str = "flac",
                 audio_bit_rate: int = 256_000) -> None:
-    """Mux grayscale pictures (K, H, W) uint8 (an array, or any iterable of (H, W) pictures) at
-    ``fps`` and a mono sound (float in [-1, 1]) into a video file with PyAV (H.264; the sound as
+    """Mux grayscale pictures and a mono sound into a video file with PyAV (H.264; the sound as
     ``audio_codec``: "flac" in MKV is lossless, "aac" in MP4 is what phones write, at
-    ``audio_bit_rate``). For simulated captures, tests and benchmarks."""
+    ``audio_bit_rate``). For simulated captures, tests and benchmarks.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The file to write; its suffix picks the container (.mkv, .mp4).
+    gray : numpy.ndarray [shape=(K, H, W)], uint8
+        The pictures: an array, or any iterable of (H, W) pictures.
+    fps : float
+        Pictures per second.
+    audio : numpy.ndarray [shape=(n,)], float
+        The sound, in [-1, 1] (clipped to it).
+    fs : int
+        Its sample rate in Hz.
+    audio_codec : str
+        FFmpeg's encoder for the sound (default "flac", stored as 16-bit).
+    audio_bit_rate : int
+        Bit rate of a lossy sound codec, in bits per second (default 256000; not used for
+        "flac").
+    """
     import av  # FFmpeg's libraries: only when a video is read or written
 
     pictures = iter(gray)
@@ -136,7 +195,25 @@ def write_video(path, gray: np.ndarray, fps: float, audio: np.ndarray, fs: int, 
 
 
 def read_audio(path) -> tuple[np.ndarray, int]:
-    """A sound file (WAV, FLAC, ...) mixed to mono, float32, and its rate."""
+    """A sound file (WAV, FLAC, ...) mixed to mono, float32, and its rate.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The sound file.
+
+    Returns
+    -------
+    audio : numpy.ndarray [shape=(n,)], float32
+        The channels averaged.
+    fs : int
+        Its sample rate in Hz.
+
+    Raises
+    ------
+    VrechoError
+        For a file libsndfile cannot read as sound.
+    """
     try:
         x, fs = sf.read(str(path), dtype="float32", always_2d=True)
     except (sf.LibsndfileError, RuntimeError) as e:
@@ -145,6 +222,26 @@ def read_audio(path) -> tuple[np.ndarray, int]:
 
 
 def image_files(folder: Path, names: list[str] | None) -> list[Path]:
+    """The picture files of a capture.
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        The folder of pictures.
+    names : list of str or None
+        The file names to take (COLMAP's ``images.txt`` names); None for every .png, .jpg and
+        .jpeg file in the folder, sorted by name.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files, in the order of ``names`` (or sorted).
+
+    Raises
+    ------
+    VrechoError
+        When ``folder`` is not a folder, holds no pictures, or lacks one of ``names``.
+    """
     if not folder.is_dir():
         raise VrechoError(f"images: {folder} is not a folder of pictures")
     if names is None:
@@ -161,7 +258,20 @@ def image_files(folder: Path, names: list[str] | None) -> list[Path]:
 
 
 def load_pictures(files: list[Path], width: int | None) -> np.ndarray:
+    """Picture files read as grayscale.
 
+    Parameters
+    ----------
+    files : list of pathlib.Path
+        The pictures, all of one size.
+    width : int or None
+        Width in pixels to scale them to (bilinearly, aspect kept); None for their own size.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(K, H, W)], uint8
+        One picture per file, in order.
+    """
     out = []
     for f in files:
         im = Image.open(f).convert("L")

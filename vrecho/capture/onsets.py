@@ -35,10 +35,9 @@ import numpy as np
 from scipy import fft
 from scipy.ndimage import maximum_filter1d
 
+from ..device import MIC_ABOVE_EMITTER_M
 from ..errors import VrechoError
-from ..scene import MIC_ABOVE_EMITTER_M
 from ..signals import FS, PERIOD_S, SPEED_OF_SOUND, analytic_envelope, analytic_filter, parabolic_peaks, probe
-
 
 PULSE_TRAIN_WAV = Path(__file__).resolve().parent.parent / "assets" / "pulse_train.wav"
 """The pulse train for the second phone to play (on repeat): 30 s of vrecho's probe once a
@@ -48,12 +47,20 @@ PCM. A player's gap at the loop's seam costs nothing: :func:`find_onsets` restar
 
 @dataclass
 class Onsets:
-    """Pulses found in a recording.
+    """Pulses found in a recording (:func:`find_onsets`).
 
-    ``samples`` (K,) where each pulse's direct sound begins (fractional samples from the
-    recording's first), ``strength_db`` (K,) its matched-filter peak above the noise floor,
-    ``missing`` (J,) where a pulse was due but none was found, ``period_s`` the train's period
-    as measured (the clocks' drift included), ``fs`` the rate.
+    Parameters
+    ----------
+    samples : numpy.ndarray [shape=(K,)], float
+        Where each pulse's direct sound begins, in fractional samples from the recording's first.
+    strength_db : numpy.ndarray [shape=(K,)], float
+        Each pulse's matched-filter peak above the noise floor, in dB.
+    missing : numpy.ndarray [shape=(J,)], float
+        Where a pulse was due but none was found, in fractional samples.
+    period_s : float
+        The train's period as measured (the clocks' drift included), in seconds.
+    fs : int
+        The recording's sample rate, in Hz.
     """
 
     samples: np.ndarray
@@ -64,6 +71,7 @@ class Onsets:
 
     @property
     def seconds(self) -> np.ndarray:
+        """The onsets (K,) in seconds from the recording's start."""
         return self.samples / self.fs
 
 
@@ -82,11 +90,42 @@ def _mono(audio, fs) -> tuple[np.ndarray, int]:
 
 def matched_envelope(audio, emitted, fs: int = FS) -> np.ndarray:
     """Envelope of the recording correlated with the emitted pulse: entry ``l`` is how much of
-    the pulse starts at sample ``l`` (length len(audio) - len(emitted) + 1)."""
-    x, fs = _mono(audio, fs)
+    the pulse starts at sample ``l``.
+
+    Parameters
+    ----------
+    audio : numpy.ndarray [shape=(n,), (n, channels) or (channels, n)]
+        The recording (the first channel is used: the longer axis is taken for time).
+    emitted : numpy.ndarray [shape=(k,)]
+        The pulse played, at ``fs``; 8 to n samples.
+    fs : int
+        Sample rate of both, in Hz (at least 8000; default 44100).
+
+    Returns
+    -------
+    numpy.ndarray [shape=(n - k + 1,)], float64
+        The envelope of the correlation (analytic signal), divided by the pulse's norm.
+
+    Raises
+    ------
+    VrechoError
+        For an empty recording, one of more than two dimensions or with NaN or infinite
+        samples; a sample rate that is not an integer of at least 8000 Hz; a pulse that is not
+        1-D, or shorter than 8 samples, or longer than the recording.
+    """
+    x, _ = _mono(audio, fs)
+    return _envelope(x, _pulse(emitted, x.size))
+
+
+def _pulse(emitted, n: int) -> np.ndarray:
     s = np.asarray(emitted, dtype=np.float64)
-    if s.ndim != 1 or not 8 <= s.size <= x.size:
-        raise VrechoError(f"emitted: expected a 1-D pulse shorter than the recording ({x.size} samples), got shape {s.shape}")
+    if s.ndim != 1 or not 8 <= s.size <= n:
+        raise VrechoError(f"emitted: expected a 1-D pulse shorter than the recording ({n} samples), got shape {s.shape}")
+    return s
+
+
+def _envelope(x: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """:func:`matched_envelope` of a checked recording and pulse."""
     n = fft.next_fast_len(x.size + s.size, real=True)
     return analytic_envelope(x, analytic_filter(s, n), n)[:x.size - s.size + 1] / np.linalg.norm(s)
 
@@ -97,29 +136,54 @@ def find_onsets(audio, fs: int = FS, *, emitted=None, period_s: float = PERIOD_S
 
     Parameters
     ----------
-    audio : array, shape (n,) or (n, channels)
-        The recording (the first channel is used).
+    audio : numpy.ndarray [shape=(n,), (n, channels) or (channels, n)]
+        The recording (the first channel is used: the longer axis is taken for time).
     fs : int
-        Its sample rate (Hz).
-    emitted : array, optional
-        The pulse played (default: vrecho's probe, :func:`~vrecho.signals.probe`, at ``fs``).
+        Its sample rate in Hz (at least 8000; default 44100).
+    emitted : numpy.ndarray [shape=(k,)], optional
+        The pulse played, at ``fs`` (default: vrecho's probe, :func:`~vrecho.signals.probe`).
     period_s : float
-        The nominal period (PROTOCOL.md: 1 s); the measured one may differ by a few per cent.
+        The nominal period in seconds (PROTOCOL.md: 1 s; 0.1 to 10 s); the measured one may
+        differ by a few per cent.
     min_snr_db : float
-        How far above the noise floor a pulse's matched-filter peak must rise.
+        How far above the noise floor, in dB, a pulse's matched-filter peak must rise
+        (default 12).
     tolerance_s : float
-        How far from its due time a pulse may be (per period of a gap).
+        How far from its due time, in seconds, a pulse may be (per period of a gap; default
+        0.01).
+
+    Returns
+    -------
+    Onsets
+        The pulses found, where pulses are missing, and the measured period.
 
     Raises
     ------
     VrechoError
-        When no pulse train is found (fewer than two pulses a period apart).
+        When no pulse train is found (fewer than two pulses a period apart); for a
+        ``period_s`` outside 0.1 to 10 s; and for a recording, rate or pulse
+        :func:`matched_envelope` refuses.
+
+    Examples
+    --------
+    Four of vrecho's pulses half a second into a recording, with a little noise:
+
+    >>> import numpy as np
+    >>> from vrecho.capture import find_onsets
+    >>> from vrecho.signals import probe, pulse_train
+    >>> x = np.r_[np.zeros(22050), pulse_train(probe(), 4), np.zeros(22050)]
+    >>> x = x + 1e-3 * np.random.default_rng(0).standard_normal(x.size)
+    >>> onsets = find_onsets(x, 44100)
+    >>> onsets.seconds.round(3)
+    array([0.5, 1.5, 2.5, 3.5])
+    >>> len(onsets.missing)
+    0
     """
     x, fs = _mono(audio, fs)
-    s = probe(fs) if emitted is None else np.asarray(emitted, dtype=np.float64)
+    s = probe(fs) if emitted is None else _pulse(emitted, x.size)
     if not 0.1 <= period_s <= 10:
         raise VrechoError(f"period_s: expected 0.1 to 10 s, got {period_s}")
-    env = matched_envelope(x, s, fs)
+    env = _envelope(x, s)
     period = period_s * fs
     floor = float(np.median(env)) + 1e-12
     half = max(int(period // 2), 1)
@@ -169,20 +233,57 @@ def find_onsets(audio, fs: int = FS, *, emitted=None, period_s: float = PERIOD_S
     return Onsets(samples, 20 * np.log10(env[idx] / floor), np.array(missing), period / fs, fs)
 
 
-def cut_frames(audio, onsets: Onsets, *, length_s: float = 1.0, mic_offset_m: float | None = None) -> np.ndarray:
+def cut_frames(audio, onsets: Onsets, *, length_s: float = 1.0, mic_offset_m: float | None = None,
+               return_index: bool = False):
     """PROTOCOL.md's frames: ``length_s`` of the recording from each pulse's emission (the direct
     sound's onset less its flight from the loudspeaker, ``mic_offset_m`` away: PROTOCOL's device
     by default), resampled to 44.1 kHz, each shifted by its fraction of a sample (a linear phase)
-    so that sample 0 is the emission. Frames that would run past the recording's end are left
-    out. Returns (K, n) float32."""
+    so that sample 0 is the emission. Frames that would run past the recording's end, or start
+    less than 64 samples (at 44.1 kHz) after its start, are left out.
+
+    Parameters
+    ----------
+    audio : numpy.ndarray [shape=(n,), (n, channels) or (channels, n)]
+        The recording, at ``onsets.fs`` (the first channel is used).
+    onsets : Onsets
+        Its pulses (:func:`find_onsets`).
+    length_s : float
+        Length of a frame in seconds (default 1).
+    mic_offset_m : float, optional
+        From the loudspeaker to the microphone, in metres (default
+        :data:`~vrecho.device.MIC_ABOVE_EMITTER_M`, 7 cm).
+    return_index : bool
+        Also return which of the onsets the frames are (default False).
+
+    Returns
+    -------
+    frames : numpy.ndarray [shape=(K, round(length_s * 44100))], float32
+        One frame per pulse kept, at 44.1 kHz, in the onsets' order.
+    index : numpy.ndarray [shape=(K,)], int
+        With ``return_index``: the onset each frame is cut from.
+
+    Raises
+    ------
+    VrechoError
+        For a recording or rate :func:`matched_envelope` refuses.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from vrecho.capture import cut_frames, find_onsets
+    >>> from vrecho.signals import probe, pulse_train
+    >>> x = np.r_[np.zeros(22050), pulse_train(probe(), 4), np.zeros(22050)]
+    >>> cut_frames(x, find_onsets(x, 44100)).shape
+    (4, 44100)
+    """
     x, fs = _mono(audio, onsets.fs)
     offset = MIC_ABOVE_EMITTER_M if mic_offset_m is None else mic_offset_m
     starts = (onsets.samples - offset / SPEED_OF_SOUND * fs) * FS / fs
     if fs != FS:
         x = librosa.resample(x, orig_sr=fs, target_sr=FS)
     n, pad = int(round(length_s * FS)), 64
-    frames = []
-    for t in starts:
+    frames, kept = [], []
+    for k, t in enumerate(starts):
         i = int(np.floor(t))
         if i - pad < 0 or i + n + pad > x.size:
             continue
@@ -190,4 +291,6 @@ def cut_frames(audio, onsets: Onsets, *, length_s: float = 1.0, mic_offset_m: fl
         f = np.fft.rfftfreq(seg.size)
         seg = np.fft.irfft(np.fft.rfft(seg) * np.exp(2j * np.pi * f * (t - i)), seg.size)  # advance by the fraction
         frames.append(seg[pad:pad + n])
-    return np.array(frames, np.float32).reshape(-1, n)
+        kept.append(k)
+    frames = np.array(frames, np.float32).reshape(-1, n)
+    return (frames, np.array(kept, int)) if return_index else frames

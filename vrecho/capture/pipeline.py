@@ -25,10 +25,32 @@ from .posing import VIEW_WIDTH, Poses, posed_scan, read_poses
 
 @dataclass
 class Recording:
-    """A capture as read by :func:`open_capture`: the sound ``audio`` (mono) at ``fs`` Hz, the
-    ``video`` it came from (None for a sound file) and when its first picture shows
-    (``video_start_s``), the pictures' ``files`` (with a sound file), COLMAP's ``poses`` and the
-    user's ``mesh`` (in the poses' z-up world), and the options of the analysis."""
+    """A capture as read by :func:`open_capture`.
+
+    Parameters
+    ----------
+    audio : numpy.ndarray [shape=(n,)], float32
+        The sound, mono.
+    fs : int
+        Its sample rate in Hz.
+    video : pathlib.Path, optional
+        The video it came from (None for a sound file).
+    video_start_s : float
+        When the video's first picture shows, in seconds from the sound's start (default 0).
+    files : list of pathlib.Path, optional
+        The pictures' files (with a sound file).
+    image_fps : float, optional
+        The rate the pictures were extracted at, in pictures per second.
+    poses : :class:`~.posing.Poses`, optional
+        COLMAP's poses of the pictures.
+    mesh : open3d.geometry.TriangleMesh, optional
+        The user's mesh, in the poses' z-up world.
+    labels : str
+        The analysis's decider, a name of :data:`vrecho.reconstruct.LABELS` (default
+        ``"echocnn"``).
+    emitter_distance_m : float, optional
+        From the loudspeaker to the microphone, in metres (PROTOCOL.md's 7 cm when None).
+    """
 
     audio: np.ndarray
     fs: int
@@ -44,9 +66,23 @@ class Recording:
 
 @dataclass
 class Analysis:
-    """What :func:`analyse` found: ``onsets``, the ``frames`` cut (K, 44100) and their ``times``
-    (s), one answer per frame in ``rows`` (the columns of ``frames.csv``), the picture at each
-    frame (``frame_pictures``, or None), and the repair (``result``, with poses and a mesh)."""
+    """What :func:`analyse` found.
+
+    Parameters
+    ----------
+    onsets : :class:`~.onsets.Onsets`
+        The pulses found.
+    frames : numpy.ndarray [shape=(K, 44100)], float32
+        The frames cut, at 44.1 kHz.
+    times : numpy.ndarray [shape=(K,)], float
+        Their pulses' onsets, in seconds from the recording's start.
+    rows : list of dict
+        One answer per frame (the columns of ``frames.csv``; see :func:`analyse`).
+    frame_pictures : numpy.ndarray [shape=(K, H, W)], uint8, or None
+        The picture at each frame, or None without pictures.
+    result : :class:`vrecho.reconstruct.Reconstruction` or None
+        The repair, with poses and a mesh.
+    """
 
     onsets: Onsets
     frames: np.ndarray
@@ -62,16 +98,41 @@ def open_capture(video=None, audio=None, images=None, poses=None, mesh=None, *, 
 
     Parameters
     ----------
-    video : path, optional
+    video : str or pathlib.Path, optional
         A video with its sound (PyAV: MP4, MOV, MKV); or ``audio``, a sound file, with its
-        pictures in the folder ``images`` (optional).
-    poses : path, optional
+        pictures in the folder ``images`` (optional). One of ``video`` and ``audio`` is given.
+    audio : str or pathlib.Path, optional
+        A sound file (WAV, FLAC).
+    images : str or pathlib.Path, optional
+        The folder of pictures, with ``audio``.
+    poses : str or pathlib.Path, optional
         COLMAP's text model of the pictures, numbered from 1 at ``image_fps`` (pictures per
         second); with ``mesh`` (.ply or .obj, in the poses' world; a y-up world is turned z up).
+    mesh : str or pathlib.Path, optional
+        The user's mesh, with ``poses``.
+    image_fps : float, optional
+        The rate the pictures were extracted at, in pictures per second; needed with ``poses``
+        or ``images``.
     labels : {"echocnn", "echocnn-only"}
-        Who decides what each hole of the mesh is.
+        Who decides what each hole of the mesh is (default ``"echocnn"``).
     emitter_distance_m : float, optional
-        From the loudspeaker to the microphone (PROTOCOL.md's 7 cm by default).
+        From the loudspeaker to the microphone, in metres, 0 to 3 (PROTOCOL.md's 7 cm by
+        default).
+
+    Returns
+    -------
+    Recording
+        The sound, the pictures' files or video, the poses and mesh, and the options.
+
+    Raises
+    ------
+    VrechoError
+        For options that do not go together (a video and a sound file, or neither; ``images``
+        with a video; ``poses`` without ``mesh`` or the reverse; ``poses`` or ``images``
+        without ``image_fps``; ``poses`` without pictures), an unknown ``labels``, an
+        ``emitter_distance_m`` outside 0 to 3 m, and for any file that cannot be read or does
+        not match the recording (:func:`~.media.read_video`, :func:`~.media.read_audio`,
+        :func:`~.posing.read_poses`, :func:`vrecho.io.read_mesh`, :func:`~.media.image_files`).
     """
     if (video is None) == (audio is None):
         raise VrechoError("capture: give a video, or --audio with a sound file (not both)")
@@ -104,8 +165,32 @@ def open_capture(video=None, audio=None, images=None, poses=None, mesh=None, *, 
 
 
 def answers(classifier, frames: np.ndarray, emitted: np.ndarray, *, images=None) -> list[dict]:
-    """EchoCNN's answers for frames (K, 44100) at 44.1 kHz, the probe ``emitted`` known (and the
-    crops ``images`` (K, 64, 25), if given), as ``frames.csv``'s columns."""
+    """EchoCNN's answers for frames at 44.1 kHz, the probe ``emitted`` known (and the crops
+    ``images``, if given), as ``frames.csv``'s columns.
+
+    Parameters
+    ----------
+    classifier : vrecho.classifier.Classifier
+        EchoCNN.
+    frames : numpy.ndarray [shape=(K, 44100)], float32
+        1 s frames at 44.1 kHz from the pulses' emission.
+    emitted : numpy.ndarray [shape=(k,)], float
+        The probe played, at 44.1 kHz.
+    images : numpy.ndarray [shape=(K, 64, 25)], uint8, optional
+        The camera's crop around the surface in each frame.
+
+    Returns
+    -------
+    list of dict
+        One per frame: ``model``, ``open``, ``material`` ("-" when open), ``depth_m``
+        (metres), ``p_open``, ``p_mirror``, ``confidence`` (rounded to 4 decimals) and
+        ``flags`` (space-separated).
+
+    Raises
+    ------
+    VrechoError
+        From EchoCNN, for frames or crops it cannot take (a silent frame, say).
+    """
     preds = classifier.predict_batch(frames, FS, images=images, emitted=emitted) if len(frames) else []
     return [{"model": p.model, "open": p.is_open, "material": "-" if p.is_open else p.material,
              "depth_m": round(float(p.depth_m), 4), "p_open": round(p.probabilities["open"], 4),
@@ -113,22 +198,44 @@ def answers(classifier, frames: np.ndarray, emitted: np.ndarray, *, images=None)
              "flags": " ".join(p.flags)} for p in preds]
 
 
-def analyse(rec: Recording, *, classifier=None, progress: bool = False) -> Analysis:
+def analyse(rec: Recording, *, classifier=None) -> Analysis:
     """The pulses of a capture (:func:`~.onsets.find_onsets`), its frames
     (:func:`~.onsets.cut_frames`) and EchoCNN's answer to each, the probe known (EchoCNN-E);
     with poses and a mesh, each frame takes the pose of its pulse, the frames that face a hole
     of the mesh are asked again with the camera's crop around it (EchoCNN-EV, PROTOCOL.md's
-    64 x 25) and the mesh is repaired (:func:`vrecho.reconstruct.reconstruct`)."""
+    64 x 25) and the mesh is repaired (:func:`vrecho.reconstruct.reconstruct`).
+
+    Parameters
+    ----------
+    rec : Recording
+        The capture (:func:`open_capture`).
+    classifier : vrecho.classifier.Classifier, optional
+        EchoCNN (the shipped weights by default).
+
+    Returns
+    -------
+    Analysis
+        Its ``rows`` hold each frame's ``frame`` and ``time_s`` (seconds) and :func:`answers`'
+        columns; with poses, a posed frame also has its position ``x_m``, ``y_m``, ``z_m``
+        (metres), and a frame facing a hole the ``hole``'s index and the answers asked again.
+
+    Raises
+    ------
+    VrechoError
+        When no pulse train is found, no pulse has a whole second of recording after it, the
+        poses or mesh do not match the recording (:func:`~.posing.posed_scan`), or the mesh has
+        holes and no pulse was played facing one.
+    """
     if classifier is None:
         from ..classifier import load_classifier  # torch-bound (1.7 s): only when EchoCNN is asked
 
         classifier = load_classifier()
     x, fs, posed = rec.audio, rec.fs, rec.poses
     onsets = find_onsets(x, fs)
-    frames = cut_frames(x, onsets, mic_offset_m=rec.emitter_distance_m)
+    frames, kept = cut_frames(x, onsets, mic_offset_m=rec.emitter_distance_m, return_index=True)
     if not len(frames):
         raise VrechoError("capture: no pulse has a whole second of recording after it")
-    times = onsets.seconds[:len(frames)]
+    times = onsets.seconds[kept]  # a pulse too near either end of the recording has no frame
     width = VIEW_WIDTH if posed is not None else None
     if rec.video is not None:
         shots = video_images(rec.video, np.r_[times, posed.time_s if posed is not None else []], width=width)

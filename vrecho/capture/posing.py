@@ -16,7 +16,6 @@ from ..errors import VrechoError
 from ..reconstruct.scan import Echoes, Scan
 from ..signals import FS
 
-
 VIEW_WIDTH = 320
 """Pictures and depth frames of a posed capture are worked at this width (pixels), as the
 simulator's camera: hole carving and EchoCNN's 64 x 25 crop need no more."""
@@ -27,10 +26,42 @@ MAX_POSE_GAP_S = 1.0
 
 
 def interpolate_poses(times, key_times, key_poses, *, max_gap_s: float = MAX_POSE_GAP_S) -> tuple[np.ndarray, np.ndarray]:
-    """Camera-to-world poses (K, 4, 4) at ``times`` (s) from posed pictures at ``key_times``:
-    positions linear and rotations spherical between the two pictures around each time, or the
-    nearest picture's beyond either end. ``ok`` (K,) says which times have a picture within
-    ``max_gap_s``; the others get the nearest pose, not to be used."""
+    """Camera-to-world poses at ``times`` from posed pictures at ``key_times``: positions linear
+    and rotations spherical between the two pictures around each time, or the nearest picture's
+    beyond either end.
+
+    Parameters
+    ----------
+    times : numpy.ndarray [shape=(K,)], float
+        The times to pose, in seconds.
+    key_times : numpy.ndarray [shape=(P,)], float
+        The posed pictures' times in seconds, in any order (one pose is kept per time).
+    key_poses : numpy.ndarray [shape=(P, 4, 4)], float
+        Their camera-to-world poses (metres).
+    max_gap_s : float
+        How close, in seconds, a picture must lie for a time to be posed (default
+        :data:`MAX_POSE_GAP_S`, 1 s).
+
+    Returns
+    -------
+    poses : numpy.ndarray [shape=(K, 4, 4)], float
+        Camera-to-world poses at ``times``.
+    ok : numpy.ndarray [shape=(K,)], bool
+        Which times have a picture within ``max_gap_s``; the others get the nearest pose, not
+        to be used.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from vrecho.capture import interpolate_poses
+    >>> moved = np.eye(4)
+    >>> moved[0, 3] = 2.0
+    >>> poses, ok = interpolate_poses([0.5, 5.0], [0.0, 1.0], np.stack([np.eye(4), moved]))
+    >>> poses[0, :3, 3]
+    array([1., 0., 0.])
+    >>> ok
+    array([ True, False])
+    """
     times = np.asarray(times, float)
     order = np.argsort(key_times)
     kt, kp = np.asarray(key_times, float)[order], np.asarray(key_poses, float)[order]
@@ -50,7 +81,22 @@ def interpolate_poses(times, key_times, key_poses, *, max_gap_s: float = MAX_POS
 
 def view_intrinsics(camera, *, width: int = VIEW_WIDTH) -> tuple[np.ndarray, int, int]:
     """A COLMAP camera's pinhole matrix scaled to ``width`` pixels across (pixel centres at
-    integers), and the scaled size."""
+    integers), and the scaled size.
+
+    Parameters
+    ----------
+    camera : :class:`vrecho.colmap.Camera`
+        The camera (distortion left out).
+    width : int
+        The working width in pixels (default :data:`VIEW_WIDTH`, 320).
+
+    Returns
+    -------
+    intrinsics : numpy.ndarray [shape=(3, 3)], float
+        The pinhole matrix, in pixels at the working size.
+    width, height : int
+        The working size in pixels (aspect kept, height rounded).
+    """
     s = width / camera.width
     K = camera.intrinsics.copy()
     K[:2, :2] *= s
@@ -60,10 +106,24 @@ def view_intrinsics(camera, *, width: int = VIEW_WIDTH) -> tuple[np.ndarray, int
 
 @dataclass
 class Poses:
-    """A capture's posed pictures (from COLMAP's text model, :mod:`vrecho.colmap`): the camera's
-    ``intrinsics`` at the working size (``width`` x ``height``), each picture's ``name``,
-    ``time_s`` on the recording's clock and camera-to-world ``pose`` in a z-up world;
-    ``to_z_up`` (4, 4) turns the model's world into that one (identity, or a y-up world turned)."""
+    """A capture's posed pictures (from COLMAP's text model, :mod:`vrecho.colmap`; see
+    :func:`read_poses`), in time order.
+
+    Parameters
+    ----------
+    intrinsics : numpy.ndarray [shape=(3, 3)], float
+        The camera's pinhole matrix at the working size, in pixels.
+    width, height : int
+        The working size in pixels.
+    names : list of str
+        Each picture's file name.
+    time_s : numpy.ndarray [shape=(P,)], float
+        Each picture's time on the recording's clock, in seconds.
+    pose : numpy.ndarray [shape=(P, 4, 4)], float
+        Each picture's camera-to-world pose in a z-up world (metres).
+    to_z_up : numpy.ndarray [shape=(4, 4)], float
+        Turns the model's world into that one (identity, or a y-up world turned).
+    """
 
     intrinsics: np.ndarray
     width: int
@@ -78,7 +138,32 @@ def read_poses(folder, image_fps: float, duration_s: float, *, video_start_s: fl
     """COLMAP's text model in ``folder`` for a capture of ``duration_s`` seconds, its pictures
     numbered from 1 at ``image_fps`` (:func:`vrecho.colmap.image_times`) from the video's first
     picture, ``video_start_s`` after the sound's start. Checked: one camera, pictures within the
-    recording, the cameras upright in a z-up world (a y-up world is turned z up)."""
+    recording (to 1 s), the cameras upright in a z-up world (a y-up world is turned z up).
+
+    Parameters
+    ----------
+    folder : str or pathlib.Path
+        The folder of COLMAP's ``cameras.txt`` and ``images.txt``.
+    image_fps : float
+        The rate the pictures were extracted at, in pictures per second.
+    duration_s : float
+        The recording's length in seconds.
+    video_start_s : float
+        When the video's first picture shows, in seconds from the sound's start (default 0).
+
+    Returns
+    -------
+    Poses
+        The pictures in time order, their intrinsics at :data:`VIEW_WIDTH`.
+
+    Raises
+    ------
+    VrechoError
+        For a model :func:`vrecho.colmap.read_model` cannot read, a non-positive ``image_fps``
+        or a picture name without a number; when the pictures use more than one camera, lie
+        outside the recording, or the cameras' up axes point neither along the world's z nor
+        its y.
+    """
     cameras, images = colmap.read_model(folder)
     used = {im.camera_id for im in images}
     if len({(cameras[c].model, cameras[c].width, cameras[c].height, tuple(cameras[c].params)) for c in used}) > 1:
@@ -111,7 +196,42 @@ def posed_scan(mesh, poses: Poses, pictures: np.ndarray, frames: np.ndarray, fra
     picture and one per pulse frame (the pose interpolated at its emission), each with the depth
     the mesh gives along its rays (:func:`~vrecho.camera.mesh_depth`) and its picture (uint8 at
     the working size), and the pulses' frames as its echoes. Pulses with no posed picture within
-    :data:`MAX_POSE_GAP_S` are left out; returns the scan and which frames it holds."""
+    :data:`MAX_POSE_GAP_S` are left out.
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh
+        The user's mesh, in the poses' z-up world (metres).
+    poses : Poses
+        The posed pictures (:func:`read_poses`).
+    pictures : numpy.ndarray [shape=(P, H, W)], uint8
+        The posed pictures at the working size, in the order of ``poses``.
+    frames : numpy.ndarray [shape=(K, 44100)], float32
+        The pulses' 1 s frames at 44.1 kHz (:func:`~.onsets.cut_frames`).
+    frame_times : numpy.ndarray [shape=(K,)], float
+        Each frame's time on the recording's clock, in seconds.
+    frame_pictures : numpy.ndarray [shape=(K, H, W)], uint8
+        The picture at each frame, at the working size.
+    emitted : numpy.ndarray [shape=(k,)], float
+        The probe played, at 44.1 kHz.
+    min_hit : float
+        Smallest share of the pulse views' pixels whose ray must meet the mesh (default 0.3).
+
+    Returns
+    -------
+    scan : :class:`~vrecho.reconstruct.Scan`
+        The P posed pictures' views, then one view per pulse kept; its :class:`Echoes` name
+        the pulse views (indices P onward) at 44.1 kHz.
+    ok : numpy.ndarray [shape=(K,)], bool
+        Which frames the scan holds.
+
+    Raises
+    ------
+    VrechoError
+        When no pulse lies within :data:`MAX_POSE_GAP_S` of a posed picture; when less than
+        ``min_hit`` of what the camera sees at the pulses meets the mesh; and when the
+        pictures' size is not the camera's at the working width.
+    """
     pulse_pose, ok = interpolate_poses(frame_times, poses.time_s, poses.pose)
     if not ok.any():
         raise VrechoError(f"poses do not match the recording: no pulse ({len(frame_times)} from "

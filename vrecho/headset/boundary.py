@@ -72,7 +72,32 @@ from .view import look_all
 
 def ranging_probe(fs: int, *, duration_s: float = 0.005, f0: float = 4000.0, f1: float = 20000.0) -> np.ndarray:
     """The ranging probe: a linear chirp from ``f0`` to ``f1`` Hz over ``duration_s``, Tukey
-    window (25 %), peak 0.5."""
+    window (25 %), peak 0.5.
+
+    Parameters
+    ----------
+    fs : int
+        Sample rate in Hz.
+    duration_s : float
+        The chirp's length in seconds (default 5 ms).
+    f0, f1 : float
+        The chirp's start and end frequencies in Hz (default 4 and 20 kHz).
+
+    Returns
+    -------
+    numpy.ndarray [shape=(round(duration_s * fs),), dtype=float64]
+
+    Raises
+    ------
+    VrechoError
+        When ``f1`` is not below the Nyquist frequency ``fs / 2``.
+
+    Examples
+    --------
+    >>> from vrecho.headset import ranging_probe
+    >>> ranging_probe(48000).shape
+    (240,)
+    """
     if f1 >= fs / 2:
         raise VrechoError(f"probe: {f1} Hz needs a sample rate above {2 * f1:.0f} Hz, got {fs}")
     t = np.arange(int(round(duration_s * fs))) / fs
@@ -83,14 +108,29 @@ def ranging_probe(fs: int, *, duration_s: float = 0.005, f0: float = 4000.0, f1:
 class Alert:
     """What the monitor says after a block.
 
-    ``level``: "clear", "caution" or "stop"; ``distance_m``: the nearest surface the wearer moves
-    toward (None if none); ``surface``: "wall", "glass", "mirror" (what the camera made of the
-    surface, :meth:`BoundaryMonitor.see`), "closed" (not yet seen), "opening" or None (see the
-    module's notes);
-    ``confidence`` in [0, 1]; ``closing_speed_mps`` and ``time_to_contact_s`` of that surface;
-    ``flags``: what was wrong with the input so far in this block ("nan", "dropout", "clipped",
-    "no_echo"); ``pulse_time_s``: when (on the stream's clock, from the first sample) the pulse
-    that measured ``distance_m`` was emitted.
+    Parameters
+    ----------
+    level : str
+        "clear", "caution" or "stop".
+    distance_m : float or None
+        The distance in metres of the surface the alert rests on: of those in the wearer's way,
+        the gravest, then the soonest to contact (None if none).
+    surface : str or None
+        "wall", "glass", "mirror" (what the camera made of the surface,
+        :meth:`BoundaryMonitor.see`), "closed" (not yet seen), "opening" or None (see the
+        module's notes).
+    confidence : float
+        In [0, 1].
+    closing_speed_mps : float or None
+        That surface's closing speed in m/s (positive: nearing).
+    time_to_contact_s : float or None
+        That surface's time to contact in seconds (None when it closes at 5 cm/s or less).
+    flags : tuple of str
+        What was wrong with the input so far in this block ("nan", "dropout", "clipped",
+        "no_echo").
+    pulse_time_s : float or None
+        When (seconds, on the stream's clock, from the first sample) the pulse that measured
+        ``distance_m`` was emitted.
     """
 
     level: str = "clear"
@@ -110,25 +150,53 @@ class BoundaryMonitor:
     Parameters
     ----------
     fs : {44100, 48000}
-        Sample rate of both streams.
+        Sample rate of both streams in Hz (default 48000).
     period_s : float
-        Time between probe pulses (sets the longest unambiguous range, c * period / 2).
+        Time between probe pulses in seconds (default 0.04; sets the longest unambiguous range,
+        c * period / 2). It must exceed the round trip to ``max_range_m`` plus 6 ms, and be at
+        most 0.5 s.
     max_range_m, min_range_m : float
-        Echoes are looked for between these distances.
+        Echoes are looked for between these distances in metres (default 4 and 0.12).
     mic_offset_m : float
-        Distance from the loudspeaker to the microphone (PROTOCOL's device: 0.07 m).
+        Distance in metres from the loudspeaker to the microphone (PROTOCOL's device: 0.07 m,
+        the default).
     caution_ttc_s, caution_m, stop_m, hysteresis_m : float
-        Alert thresholds (see the module's notes).
+        Alert thresholds, in seconds and metres (default 2 s, 1 m, 0.5 m, 0.1 m; see the
+        module's notes); 0 < ``stop_m`` < ``caution_m``, ``caution_ttc_s`` > 0,
+        ``hysteresis_m`` >= 0.
     approach_m : float
-        A surface counts as approached when it came this much nearer within 0.8 s (more than a
-        head's bob).
+        A surface counts as approached when it came this much nearer, in metres, within 0.8 s
+        (default 0.12: more than a head's bob).
     miss_m : float
-        A surface the wearer will pass farther from than this (closest point of approach) is
-        not in the way: the wall above a door, a corner to one side.
+        A surface the wearer will pass farther from than this, in metres (closest point of
+        approach; default 0.4), is not in the way: the wall above a door, a corner to one side.
     threshold : float
         An echo must rise this many times above the envelope's median (4.5, 13 dB: a mirror
         2.5 m ahead is heard through pink noise 20 dB below the direct sound; the tracks keep
         single noise peaks from mattering).
+
+    Attributes
+    ----------
+    alert : Alert
+        The alert returned for the last block.
+
+    Raises
+    ------
+    VrechoError
+        For another sample rate, a ``period_s`` out of range, or thresholds out of order.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from vrecho.headset import BoundaryMonitor
+    >>> monitor = BoundaryMonitor(48000)
+    >>> speaker = np.zeros(480)  # a 10 ms block
+    >>> mic = 1e-3 * np.random.default_rng(0).standard_normal(480)
+    >>> alert = monitor(mic, speaker)  # speaker now holds the probe's first 5 ms
+    >>> alert.level, alert.distance_m
+    ('clear', None)
+    >>> round(float(np.abs(speaker).max()), 3)
+    0.5
     """
 
     def __init__(self, fs: int = 48000, *, period_s: float = 0.04, max_range_m: float = 4.0, min_range_m: float = 0.12,
@@ -198,15 +266,42 @@ class BoundaryMonitor:
 
     # -- The callback ------------------------------------------------------------------------------
     def __call__(self, mic, speaker=None) -> Alert:
+        """:meth:`process`: the audio callback's call.
+
+        Parameters
+        ----------
+        mic, speaker
+            As for :meth:`process`.
+
+        Returns
+        -------
+        Alert
+            As :meth:`process` returns it.
+        """
         return self.process(mic, speaker)
 
     def process(self, mic, speaker=None) -> Alert:
-        """Read one microphone block, fill the loudspeaker block (if given, same number of frames;
-        every channel gets the probe), and return the alert.
+        """Read one microphone block, fill the loudspeaker block, and return the alert.
 
-        ``mic``: (frames,) or (frames, channels) samples in [-1, 1] (channel 0 is used);
-        ``speaker``: a writable array of the same number of frames, or None when the probe is
-        played some other way (:meth:`speaker_block` gives the samples).
+        Parameters
+        ----------
+        mic : numpy.ndarray [shape=(frames,) or (frames, channels)]
+            Samples in [-1, 1] (channel 0 is used); any block size, changing from call to call.
+        speaker : numpy.ndarray [shape=(frames,) or (frames, channels)], optional
+            A writable array of the same number of frames, filled in place (every channel gets
+            the probe); None when the probe is played some other way (:meth:`speaker_block`
+            gives the samples).
+
+        Returns
+        -------
+        Alert
+            A new one per block (one already returned keeps its flags).
+
+        Raises
+        ------
+        VrechoError
+            For a ``mic`` block that is not numeric (frames,) or (frames, channels), or a
+            ``speaker`` block of another length.
         """
         x = np.asarray(mic)
         if x.ndim == 2:
@@ -242,8 +337,20 @@ class BoundaryMonitor:
         return self._alert
 
     def speaker_block(self, n: int) -> np.ndarray:
-        """The loudspeaker's next ``n`` samples (the probe at the start of every period), for the
-        block that starts at the monitor's current sample (call before :meth:`process` on it)."""
+        """The loudspeaker's next ``n`` samples (the probe at the start of every period).
+
+        For the block that starts at the monitor's current sample: call it before
+        :meth:`process` on that block (it does not advance the monitor's clock).
+
+        Parameters
+        ----------
+        n : int
+            The block's length in frames.
+
+        Returns
+        -------
+        numpy.ndarray [shape=(n,), dtype=float64]
+        """
         out = np.zeros(n)
         start = self._now
         k = start // self.period
@@ -257,6 +364,7 @@ class BoundaryMonitor:
 
     @property
     def alert(self) -> Alert:
+        """The alert returned for the last block (a clear one before the first)."""
         return self._alert
 
     def see(self, image, depth, intrinsics, *, model=None) -> str | None:
@@ -269,13 +377,28 @@ class BoundaryMonitor:
         block on. Call it from the camera's thread a few times a second, not from the audio
         callback (some 5 to 15 ms a frame on one core: EchoCNN's visual branch).
 
-        ``image`` (H, W) grayscale (uint8, or floats in [0, 1]) and ``depth`` (H, W) z-depth in
-        metres (0 or NaN: no return), registered, from a camera beside the microphone looking
-        along the wearer's forward axis; ``intrinsics`` its 3 x 3 pinhole matrix; ``model``: the
-        visual branch (the shipped one by default).
+        Parameters
+        ----------
+        image : numpy.ndarray [shape=(H, W)]
+            Grayscale (uint8, or floats in [0, 1]), from a camera beside the microphone looking
+            along the wearer's forward axis.
+        depth : numpy.ndarray [shape=(H, W)]
+            Z-depth in metres (0 or NaN: no return), registered to ``image``.
+        intrinsics : numpy.ndarray [shape=(3, 3)]
+            The camera's pinhole matrix.
+        model : EchoCNN, optional
+            The visual branch (the shipped one by default).
 
-        Returns the surface the alert now rests on ("closed" if the frame could not tell), or None
-        when it rests on none.
+        Returns
+        -------
+        str or None
+            The surface the alert now rests on, as the votes so far lead ("closed" while no
+            frame could tell), or None when it rests on none.
+
+        Raises
+        ------
+        VrechoError
+            For a bad frame or intrinsics (:func:`vrecho.headset.view.look`).
         """
         t = self._now / self.fs
         verdict = self._verdict_track

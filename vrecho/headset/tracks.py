@@ -15,6 +15,29 @@ import numpy as np
 
 @dataclass
 class Track:
+    """A surface the echoes follow over pulses, as :class:`~vrecho.headset.BoundaryMonitor` keeps it.
+
+    Parameters
+    ----------
+    times : collections.deque of float
+        When (seconds, on the stream's clock) each of its echoes' pulses was emitted; the last 64.
+    dists : collections.deque of float
+        Each echo's distance in metres, as measured; the last 64.
+    strengths : collections.deque of float
+        Each echo's matched-filter peak as a share of the direct sound's; the last 64.
+    approached_at : float
+        When (seconds) the surface last counted as approached; -inf until it has.
+    speed : float or None
+        d distance / dt in m/s (negative: approaching), an alpha-beta filter's; None until the
+        second echo.
+    ahead : bool or None
+        In the wearer's way at the last update (None: cannot tell yet).
+    d_hat : float
+        The filtered distance in metres at the last echo.
+    views : dict of str to float
+        What the camera made of it: surface ("wall", "glass", "mirror") to summed confidence.
+    """
+
     times: deque = field(default_factory=lambda: deque(maxlen=64))
     dists: deque = field(default_factory=lambda: deque(maxlen=64))
     strengths: deque = field(default_factory=lambda: deque(maxlen=64))
@@ -26,14 +49,42 @@ class Track:
 
     @property
     def surface(self) -> str:
+        """What the camera's views lead with ("wall", "glass", "mirror"), or "closed" if none."""
         return max(self.views, key=self.views.get) if self.views else "closed"
 
     def predict(self, t: float) -> float:
+        """The filtered distance extrapolated to a later time.
+
+        Parameters
+        ----------
+        t : float
+            The time in seconds, on the stream's clock.
+
+        Returns
+        -------
+        float
+            ``d_hat`` moved on at ``speed`` (0 while unknown) from the last echo, in metres.
+        """
         return self.d_hat + (self.speed or 0.0) * (t - self.times[-1])
 
     def update(self, t: float, d: float, strength: float, *, alpha: float = 0.6, beta: float = 0.3) -> None:
-        """An alpha-beta filter of distance and speed (it follows a wearer who starts or stops
-        walking within a few pulses), and the raw history."""
+        """Add one echo: an alpha-beta filter of distance and speed, and the raw history.
+
+        The filter follows a wearer who starts or stops walking within a few pulses. The first
+        echo sets the distance; the second sets the speed from the two (a fast walk's echo moves
+        some 8 cm a pulse); from the third on, the filter's residual corrects both.
+
+        Parameters
+        ----------
+        t : float
+            When the echo's pulse was emitted, in seconds.
+        d : float
+            The echo's distance in metres.
+        strength : float
+            The echo's peak as a share of the direct sound's.
+        alpha, beta : float
+            The filter's gains on distance and speed (default 0.6 and 0.3).
+        """
         if not self.times:
             self.d_hat, self.speed = d, None
         else:
@@ -56,11 +107,28 @@ class Track:
         return [*self.times, extra[0]], [*self.dists, extra[1]]
 
     def explained_by(self, offsets: list[float], *, span_s: float = 0.6, extra=None) -> bool:
-        """Whether the track is better read as a second-order echo that passes by at one of
-        ``offsets`` (the distances of surfaces that stay put: floor, ceiling, side walls; a
-        wall's echo by way of the ceiling nears like a point that far overhead) than as a
-        surface straight ahead: sqrt(d^2 - a^2) is then the one that falls linearly. ``extra``:
-        one more point (t, d) after the history."""
+        """Whether the track reads better as a second-order echo passing by than as a surface ahead.
+
+        A wall's echo by way of the ceiling nears like a point that far overhead: for a
+        second-order echo passing by at offset ``a``, sqrt(d^2 - a^2) is the one that falls
+        linearly, not d. True when, over the last ``span_s``, some offset's sqrt(d^2 - a^2) has an
+        rms residual about a straight line in time below 0.7 of that of d itself.
+
+        Parameters
+        ----------
+        offsets : list of float
+            The distances in metres of surfaces that stay put (floor, ceiling, side walls); only
+            those more than 2 cm nearer than the span's nearest echo are tried.
+        span_s : float
+            The stretch of history fitted, in seconds (default 0.6); fewer than 8 echoes in it
+            answer False.
+        extra : tuple of float, optional
+            One more point (t, d), seconds and metres, after the history.
+
+        Returns
+        -------
+        bool
+        """
         times, dists = self._history(extra)
         t = np.fromiter(times, float, len(times))
         first = int(np.searchsorted(t, t[-1] - span_s))
@@ -80,12 +148,42 @@ class Track:
         return bool(np.any(residual(np.sqrt(d ** 2 - a[:, None] ** 2)) < 0.49 * frontal))  # rms below 0.7 of it
 
     def ahead_with(self, t: float, d: float, miss_m: float, still: list[float]) -> bool:
-        """Whether the surface is in the way (:meth:`in_the_way`, not :meth:`explained_by` a
-        surface that stays put) with one more echo ``d`` at ``t``, the history left as it is."""
+        """Whether the surface is in the way with one more echo, the history left as it is.
+
+        In the way: :meth:`in_the_way` says True, and it is not :meth:`explained_by` a surface
+        that stays put.
+
+        Parameters
+        ----------
+        t : float
+            When the extra echo's pulse was emitted, in seconds.
+        d : float
+            The extra echo's distance in metres.
+        miss_m : float
+            The closest approach, in metres, beyond which the surface is not in the way.
+        still : list of float
+            The distances in metres of the surfaces that stay put.
+
+        Returns
+        -------
+        bool
+        """
         return bool(self.in_the_way(miss_m, extra=(t, d))) and not self.explained_by(still, extra=(t, d))
 
     def closed_in(self, span_s: float) -> float:
-        """How much nearer the surface came over the last ``span_s`` (0 until the track is that old)."""
+        """How much nearer the surface came over the last ``span_s``.
+
+        Parameters
+        ----------
+        span_s : float
+            The stretch of history in seconds.
+
+        Returns
+        -------
+        float
+            The distance in metres it closed (negative: it receded); 0 until the track spans 0.6
+            of ``span_s``.
+        """
         t = self.times
         if t[-1] - t[0] < 0.6 * span_s:
             return 0.0
@@ -93,15 +191,31 @@ class Track:
         return float(self.dists[k] - self.dists[-1])
 
     def in_the_way(self, miss_m: float, *, spans_s=(0.6, 0.45, 0.32), extra=None) -> bool | None:
-        """Whether the wearer will pass within ``miss_m`` of the surface (closest point of
-        approach). A point at lateral offset ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, a
-        quadratic in t (fitted to the last ``span_s``) whose minimum is a^2; a surface straight
-        ahead has a = 0. True when a^2 lies below miss_m^2 by two standard errors of the fit
-        (and not far below 0, which no steady motion gives), False when above by two, None while
-        it cannot tell (a short track, a far surface: the minimum is then an extrapolation, and a
-        head's bob hides the curvature). The longest of ``spans_s`` that tells answers (a track
-        may have picked up another echo's history where the two crossed). ``extra``: one more
-        point (t, d) after the history."""
+        """Whether the wearer will pass within ``miss_m`` of the surface (closest point of approach).
+
+        A point at lateral offset ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, a quadratic in t
+        (fitted to the last ``span_s``) whose minimum is a^2; a surface straight ahead has a = 0.
+        The longest of ``spans_s`` that tells answers (a track may have picked up another echo's
+        history where the two crossed); a span the track does not reach 0.9 of, or with fewer
+        than 8 echoes, or whose fit is not nearing at a steady pace, does not tell.
+
+        Parameters
+        ----------
+        miss_m : float
+            The closest approach in metres beyond which the surface is not in the way.
+        spans_s : tuple of float
+            The stretches of history fitted, in seconds (default 0.6, 0.45 and 0.32).
+        extra : tuple of float, optional
+            One more point (t, d), seconds and metres, after the history.
+
+        Returns
+        -------
+        bool or None
+            True when a^2 lies below miss_m^2 by two standard errors of the fit (and not far
+            below 0, which no steady motion gives: above -miss_m^2), False when above by two,
+            None while it cannot tell (a short track, a far surface: the minimum is then an
+            extrapolation, and a head's bob hides the curvature).
+        """
         times, dists = self._history(extra)
         # One backward pass in plain floats over the last points (some 15 a span), keeping each
         # span's sums as the pass reaches its first point.

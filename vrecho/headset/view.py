@@ -59,9 +59,16 @@ WEIGHTS = "headset_view.pt"
 class SurfaceView:
     """What one camera frame says of the surface the echo found ``distance_m`` ahead.
 
-    ``surface``: "wall", "glass" or "mirror"; ``confidence`` in [0.5, 1]; ``agree``: the share of
-    the straight-ahead depth readings at the echo's distance; ``crop``: the 64 x 25 crop of the
-    pane that was classified (None for a wall).
+    Parameters
+    ----------
+    surface : str
+        "wall", "glass" or "mirror".
+    confidence : float
+        In [0.5, 1].
+    agree : float
+        The share, in [0, 1], of the straight-ahead depth readings at the echo's distance.
+    crop : numpy.ndarray [shape=(64, 25), dtype=uint8] or None
+        The crop of the pane that was classified (None for a wall).
     """
 
     surface: str
@@ -71,10 +78,23 @@ class SurfaceView:
 
 
 def depth_window(distance_m: float) -> tuple[float, float]:
-    """Z-depths (m) a depth camera beside the emitter reads, straight ahead, of a plane
-    ``distance_m`` from the emitter that it faces within 20 degrees (a ray within ``CONE_DEG`` of
-    the axis meets it at most 25 degrees off its normal: 1 / cos 25 = 1.10), with 10 cm of slack for
-    the sensor's noise and the wearer's motion between the echo and the frame."""
+    """The z-depths a depth camera beside the emitter reads, straight ahead, of the echo's plane.
+
+    The plane lies ``distance_m`` from the emitter, and the camera faces it within 20 degrees (a
+    ray within ``CONE_DEG`` of the axis meets it at most 25 degrees off its normal: 1 / cos 25 =
+    1.10), with 10 cm of slack for the sensor's noise and the wearer's motion between the echo
+    and the frame.
+
+    Parameters
+    ----------
+    distance_m : float
+        The echo's distance from the emitter in metres.
+
+    Returns
+    -------
+    lo, hi : float
+        The window in metres: ``distance_m - 0.1`` to ``1.12 * distance_m + 0.1``.
+    """
     return distance_m - 0.1, 1.12 * distance_m + 0.1
 
 
@@ -126,41 +146,122 @@ def _pane(g: np.ndarray, z: np.ndarray, cone: np.ndarray, distance_m: float) -> 
 
 
 def pane_crop(image, depth, intrinsics, distance_m: float) -> tuple[float, np.ndarray | None]:
-    """The share of straight-ahead depth readings at the echo's distance, and (when under half)
-    the 64 x 25 uint8 crop of the region the sensor reads past it (see the module's notes)."""
+    """The share of straight-ahead depth readings at the echo's distance, and the pane's crop.
+
+    The crop, when the share is under half, is of the region the sensor reads past the echo's
+    plane (see the module's notes).
+
+    Parameters
+    ----------
+    image : numpy.ndarray [shape=(H, W)]
+        Grayscale, uint8 or floats in [0, 1]; at least 16 x 16 pixels.
+    depth : numpy.ndarray [shape=(H, W)]
+        The depth sensor's z-depth in metres, registered to ``image``; 0 (or NaN) where it
+        returns nothing.
+    intrinsics : numpy.ndarray [shape=(3, 3)]
+        The camera's pinhole matrix.
+    distance_m : float
+        The echo's distance in metres (not checked here: :func:`look` checks it).
+
+    Returns
+    -------
+    agree : float
+        The share, in [0, 1], of the straight-ahead readings within :func:`depth_window`.
+    crop : numpy.ndarray [shape=(64, 25), dtype=uint8] or None
+        The pane's crop; None when ``agree`` is at least 0.5, or when nothing straight ahead
+        reads past the echo's plane.
+
+    Raises
+    ------
+    VrechoError
+        For frames of different shapes or under 16 x 16 pixels, an image that is neither uint8
+        nor finite floats in [0, 1], or intrinsics that are not a 3 x 3 pinhole matrix with
+        positive focal lengths and the principal point in the frame.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from vrecho.headset import pane_crop
+    >>> K = np.array([[60.0, 0, 32], [0, 60.0, 24], [0, 0, 1]])
+    >>> depth = np.full((48, 64), 2.0)
+    >>> depth[10:40, 20:50] = 0.0  # a pane the sensor gets nothing back from
+    >>> agree, crop = pane_crop(np.zeros((48, 64), np.uint8), depth, K, 2.0)
+    >>> agree, crop.shape
+    (0.0, (64, 25))
+    """
     return _pane(*_frame(image, depth, intrinsics), distance_m)
 
 
 def look(image, depth, intrinsics, distance_m: float, *, model: EchoCNN | None = None) -> SurfaceView | None:
-    """What a camera frame says of the surface an echo found ``distance_m`` (m, from the
-    loudspeaker) straight ahead.
+    """What a camera frame says of the surface an echo found ``distance_m`` straight ahead.
+
+    A wall needs no network; glass or a mirror is told by the visual branch (torch is imported
+    then).
 
     Parameters
     ----------
-    image : numpy.ndarray, shape (H, W)
+    image : numpy.ndarray [shape=(H, W)]
         Grayscale, uint8 or floats in [0, 1], from a camera beside the loudspeaker looking along
-        the wearer's forward axis.
-    depth : numpy.ndarray, shape (H, W)
+        the wearer's forward axis; at least 16 x 16 pixels.
+    depth : numpy.ndarray [shape=(H, W)]
         The depth sensor's z-depth in metres, registered to ``image``; 0 (or NaN) where it
         returns nothing.
-    intrinsics : numpy.ndarray, shape (3, 3)
-        The camera's pinhole matrix.
+    intrinsics : numpy.ndarray [shape=(3, 3)]
+        The camera's pinhole matrix (pixels).
     distance_m : float
-        The echo's distance.
+        The echo's distance in metres, from the loudspeaker.
     model : EchoCNN, optional
         The visual branch; :func:`load_model`'s by default.
 
     Returns
     -------
-    SurfaceView, or None when the frame cannot tell: the depth sensor returned nothing
-    anywhere (off, or blinded), or something nearer than the echo fills the view ahead.
+    SurfaceView or None
+        None when the frame cannot tell: the depth sensor returned nothing anywhere (off, or
+        blinded), or something nearer than the echo fills the view ahead.
+
+    Raises
+    ------
+    VrechoError
+        For a bad frame or intrinsics (as :func:`pane_crop`), or a distance that is not a
+        positive finite number.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from vrecho.headset import look
+    >>> K = np.array([[60.0, 0, 32], [0, 60.0, 24], [0, 0, 1]])
+    >>> depth = np.full((48, 64), 2.0)  # a wall 2 m ahead fills the view
+    >>> view = look(np.zeros((48, 64), np.uint8), depth, K, 2.0)
+    >>> view.surface, view.confidence
+    ('wall', 1.0)
     """
     return look_all(image, depth, intrinsics, [distance_m], model=model)[0]
 
 
 def look_all(image, depth, intrinsics, distances_m, *, model: EchoCNN | None = None) -> list[SurfaceView | None]:
-    """:func:`look` for several echoes' distances in one frame (the frame read once, the crops
-    classified in one batch)."""
+    """:func:`look` for several echoes' distances in one frame.
+
+    The frame is read once, and the crops are classified in one batch.
+
+    Parameters
+    ----------
+    image, depth, intrinsics
+        The frame, as for :func:`look`.
+    distances_m : sequence of float
+        The echoes' distances in metres, from the loudspeaker.
+    model : EchoCNN, optional
+        The visual branch; :func:`load_model`'s by default.
+
+    Returns
+    -------
+    list of SurfaceView or None
+        One per distance, in order, as :func:`look` answers.
+
+    Raises
+    ------
+    VrechoError
+        As :func:`look`, for any of the distances.
+    """
     g, z, cone = _frame(image, depth, intrinsics)
     for d in distances_m:
         if not np.isfinite(d) or d <= 0:
@@ -182,7 +283,20 @@ def look_all(image, depth, intrinsics, distances_m, *, model: EchoCNN | None = N
 
 
 def material_probability(crops: np.ndarray, *, model: EchoCNN | None = None) -> np.ndarray:
-    """P(mirror) of each 64 x 25 uint8 crop (N, 64, 25)."""
+    """P(mirror) of each crop, from the visual branch.
+
+    Parameters
+    ----------
+    crops : numpy.ndarray [shape=(N, 64, 25), dtype=uint8]
+        Pane crops, as :func:`pane_crop` makes them.
+    model : EchoCNN, optional
+        The visual branch; :func:`load_model`'s by default.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(N,), dtype=float32]
+        The probability that each crop shows a mirror (rather than glass).
+    """
     import torch  # heavy (1.7 s): the audio path imports this module and never classifies
 
     model = model or load_model()
@@ -195,8 +309,24 @@ _MODEL: EchoCNN | None = None
 
 
 def load_model(path: str | Path | None = None) -> EchoCNN:
-    """The visual branch with the weights shipped in the package (loaded once), or those of
-    ``path`` (written by :func:`save`, as :mod:`vrecho.learn.headset_view` does)."""
+    """The visual branch with the weights shipped in the package, or those of ``path``.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path, optional
+        Weights written by :func:`save` (as :mod:`vrecho.learn.headset_view` does); None: the
+        shipped ones, loaded once and kept.
+
+    Returns
+    -------
+    EchoCNN
+        The model, in evaluation mode.
+
+    Raises
+    ------
+    VrechoError
+        When ``path`` is no file, or not a headset-view model.
+    """
     global _MODEL
     if path is None and _MODEL is not None:
         return _MODEL
@@ -224,7 +354,15 @@ def _load(path: Path) -> EchoCNN:
 
 
 def save(model: EchoCNN, path: str | Path) -> None:
-    """The weights in half precision (the crops' classes do not need more) with the model's config."""
+    """Write the weights in half precision (the crops' classes need no more), with the model's config.
+
+    Parameters
+    ----------
+    model : EchoCNN
+        The visual branch to save.
+    path : str or pathlib.Path
+        The file to write (torch's format), readable by :func:`load_model`.
+    """
     import torch  # heavy (1.7 s): the audio path imports this module and never classifies
 
     torch.save({"config": model.config, "state": {k: v.half() if v.is_floating_point() else v

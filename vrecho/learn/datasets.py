@@ -27,13 +27,12 @@ from __future__ import annotations
 import csv
 import io
 import json
+import multiprocessing
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
-
-import multiprocessing
 
 import numpy as np
 from tqdm import tqdm
@@ -60,6 +59,20 @@ up from the emitter). Missing values are -1, empty or nan."""
 
 @dataclass(frozen=True)
 class Preset:
+    """A dataset's size.
+
+    Attributes
+    ----------
+    n_scenes : int
+        Rooms.
+    n_poses : int
+        Device poses per room, each facing a discontinuity (echo frames).
+    n_sources : int
+        Ambient sources per room (source frames).
+    split : tuple of float
+        Share of rooms for train, val and test.
+    """
+
     n_scenes: int
     n_poses: int
     n_sources: int
@@ -166,6 +179,9 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
              cache: str | Path | None = None, progress: bool = True) -> Path:
     """Generate (or finish) a dataset in ``out``.
 
+    Resumable: a rerun does only the rooms not yet finished; a complete dataset is returned as
+    it is.
+
     Parameters
     ----------
     out : path
@@ -181,6 +197,17 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
         Impulse-response cache folder (default: :func:`vrecho.sim.acoustics.default_cache_dir`).
     progress : bool
         Show a progress bar.
+
+    Returns
+    -------
+    pathlib.Path
+        The dataset folder.
+
+    Raises
+    ------
+    VrechoError
+        For an unknown preset, a negative or non-integer seed, fewer than 1 worker, an ``out``
+        that cannot be written, or one that holds another dataset or other files.
     """
     import zarr  # heavy (0.5 s to import): only the dataset's arrays need it
 
@@ -258,7 +285,32 @@ class Dataset:
     """A finished dataset folder: arrays (lazy, Zarr) and labels (NumPy columns).
 
     ``labels[column]`` is a NumPy array per column of :data:`LABEL_COLUMNS`; ``audio``,
-    ``logmel``, ``image`` and ``ir`` are Zarr arrays (index them to read).
+    ``logmel``, ``image`` and ``ir`` are Zarr arrays (index them to read). ``len(ds)`` is the
+    number of frames.
+
+    Parameters
+    ----------
+    path : str or path
+        The dataset folder (:func:`generate`).
+
+    Attributes
+    ----------
+    path : pathlib.Path
+    manifest : dict
+        ``manifest.json``.
+    audio : zarr.Array, shape (N, 44100), float16
+        1 s microphone frames at 44.1 kHz.
+    logmel : zarr.Array, shape (N, 62, 25), float32
+    image : zarr.Array, shape (N, 64, 25), uint8
+    ir : zarr.Array, shape (R, 44100), float32
+        The simulated impulse responses.
+    labels : dict of str to numpy.ndarray
+        One (N,) column per entry of :data:`LABEL_COLUMNS`.
+
+    Raises
+    ------
+    VrechoError
+        When ``path`` holds no manifest, or an unfinished dataset.
     """
 
     def __init__(self, path: str | Path):
@@ -279,7 +331,21 @@ class Dataset:
         return len(self.labels["frame"])
 
     def mask(self, split: str | None = None, kind: str | None = "echo", *, heard: bool | None = None) -> np.ndarray:
-        """Boolean mask of frames by room split, frame kind and whether the sound is a train sound."""
+        """Boolean mask of frames by room split, frame kind and whether the sound is a train sound.
+
+        Parameters
+        ----------
+        split : {"train", "val", "test"}, optional
+            The rooms' split; None for all.
+        kind : {"echo", "source"}, optional
+            The frames' kind (default ``echo``); None for both.
+        heard : bool, optional
+            True for the train sounds, False for the held-out ones; None for all.
+
+        Returns
+        -------
+        numpy.ndarray, shape (N,), bool
+        """
         m = np.ones(len(self), bool)
         if split is not None:
             m &= self.labels["split"] == split
@@ -290,11 +356,33 @@ class Dataset:
         return m
 
     def paper_split(self, split: str, kind: str = "echo") -> np.ndarray:
-        """PROTOCOL.md's benchmark: train sounds in train/val rooms, held-out sounds in test rooms."""
+        """PROTOCOL.md's benchmark: train sounds in train/val rooms, held-out sounds in test rooms.
+
+        Parameters
+        ----------
+        split : {"train", "val", "test"}
+        kind : {"echo", "source"}
+            Default ``echo``.
+
+        Returns
+        -------
+        numpy.ndarray, shape (N,), bool
+            The frames' mask.
+        """
         return self.mask(split, kind, heard=split != "test")
 
     def echo_ir_rows(self, split: str) -> np.ndarray:
-        """One stored frame per echo impulse response of a split (its first), in response order."""
+        """One stored frame per echo impulse response of a split (its first), in response order.
+
+        Parameters
+        ----------
+        split : {"train", "val", "test"}
+
+        Returns
+        -------
+        numpy.ndarray, shape (R,), int
+            Frame indices.
+        """
         m = self.mask(split, "echo")
         _, first = np.unique(self.labels["ir"][m], return_index=True)
         return np.where(m)[0][first]
@@ -311,14 +399,24 @@ class Dataset:
             One frame per impulse response and entry: vrecho's own probe, or a random broadband
             probe (:func:`vrecho.signals.random_probe`).
         seed : int
+            With the split, seeds the random probes and the recording conditions.
+        progress : bool
+            Show a progress bar (default False).
 
         Returns
         -------
         audio : numpy.ndarray, shape (N, 44100), float32
+            1 s frames at 44.1 kHz from the emission.
         emitted : numpy.ndarray, shape (N, 4410), float32
+            The 100 ms probe each frame emitted.
         rows : numpy.ndarray, shape (N,)
             For each frame, a stored frame of the same impulse response (its labels and image).
         probe_kind : numpy.ndarray of str, shape (N,)
+
+        Raises
+        ------
+        VrechoError
+            When ``probes`` holds an entry other than ``vrecho`` or ``random``.
         """
         if not set(probes) <= {"vrecho", "random"}:
             raise VrechoError(f"probes: expected 'vrecho' or 'random' entries, got {probes!r}")
@@ -344,16 +442,51 @@ class Dataset:
                 np.asarray(kinds, dtype=str))
 
     def emitted(self, frame: int) -> np.ndarray:
-        """The exact sound emitted for a frame (regenerated from its seed)."""
+        """The exact sound emitted for a frame (regenerated from its seed).
+
+        Parameters
+        ----------
+        frame : int
+            The frame's index.
+
+        Returns
+        -------
+        numpy.ndarray, shape (4410,), float32
+            The 100 ms sound at 44.1 kHz.
+        """
         return emitted_sound(str(self.labels["sound"][frame]), FS,
                              np.random.default_rng(int(self.labels["sound_seed"][frame])))
 
     def scene(self, index: int):
+        """The room ``index`` of the dataset, as a :class:`~vrecho.scene.Scene` (``scenes/``).
+
+        Parameters
+        ----------
+        index : int
+            The room's index, from 0.
+
+        Returns
+        -------
+        Scene
+        """
         return load_scene(self.path / "scenes" / f"scene_{index:04d}.json")
 
 
 def read_labels(path: str | Path) -> dict[str, np.ndarray]:
-    """``labels.csv`` as a dict of NumPy columns (ints, floats or strings by column)."""
+    """``labels.csv`` as a dict of NumPy columns (ints, floats or strings by column).
+
+    Parameters
+    ----------
+    path : str or path
+        The CSV file.
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        One (N,) column per entry of :data:`LABEL_COLUMNS`: ``split``, ``kind``, ``sound`` and
+        ``material`` str; ``frame``, ``scene``, ``pose``, ``ir``, ``heard``, ``sound_seed``,
+        ``surface`` and ``is_open`` int64; the rest float64 (metres, degrees, seconds, dB).
+    """
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
     out = {}
@@ -369,5 +502,20 @@ def read_labels(path: str | Path) -> dict[str, np.ndarray]:
 
 
 def open_dataset(path: str | Path) -> Dataset:
-    """Open a finished dataset folder (see :class:`Dataset`)."""
+    """Open a finished dataset folder (see :class:`Dataset`).
+
+    Parameters
+    ----------
+    path : str or path
+        The dataset folder.
+
+    Returns
+    -------
+    Dataset
+
+    Raises
+    ------
+    VrechoError
+        When ``path`` holds no dataset or an unfinished one.
+    """
     return Dataset(path)

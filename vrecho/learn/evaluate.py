@@ -1,5 +1,6 @@
 """The benchmark harness: every method of PROTOCOL.md trained and judged on the same data in one
-run, the paper's tables, confusion matrices and the activation-maximisation figure.
+run (the paper's tables, confusion matrices and the activation-maximisation figure are drawn by
+:mod:`.report`).
 
 Two protocols (PROTOCOL.md):
 
@@ -16,7 +17,6 @@ the bundle the classifier ships (``classifier.pt``, see :mod:`vrecho.classifier`
 
 from __future__ import annotations
 
-import csv
 import json
 import pickle
 import time
@@ -30,16 +30,29 @@ from scipy.signal import resample_poly
 from ..errors import VrechoError
 from ..features import echo_features
 from ..io import atomic_write_text, ensure_writable_dir
-from ..models import CLASS_HEADS, DEPTH_BINS_M, HEADS, EchoCNN, FeatureBaseline, build
-from ..scene import MIC_ABOVE_EMITTER_M
-from ..signals import FS, SPEED_OF_SOUND
+from ..models import HEADS, EchoCNN, FeatureBaseline, build
 from .datasets import open_dataset
+from .report import activation_maximisation, confusion_figures, write_tables
 from .train import fit, metrics, predict_batches, targets
 
 
 @dataclass(frozen=True)
 class Method:
-    """One row of the tables: a model kind, its inputs and the protocol it is judged under."""
+    """One row of the tables: a model kind, its inputs and the protocol it is judged under.
+
+    Attributes
+    ----------
+    name : str
+    kind : {"cnn", "knn", "svm"}
+        An :class:`~vrecho.models.EchoCNN`, or a :class:`~vrecho.models.FeatureBaseline`.
+    inputs : tuple of str
+        ``mel``, ``image``, ``wave``, ``echo``; ``envelope`` and ``bands`` for a baseline.
+    protocol : {"paper", "product"}
+    fusion : {"concat", "mfb"}
+    wave_layers : {5, 8}
+    max_epochs : int, optional
+        A cap below the run's epochs (the slow raw-waveform baselines).
+    """
 
     name: str
     kind: str  # "cnn", "knn" or "svm"
@@ -51,13 +64,30 @@ class Method:
 
     @property
     def slug(self) -> str:
+        """The name in lower case, its other characters ``_``: the model's file name."""
         return "".join(c if c.isalnum() else "_" for c in self.name.lower()).strip("_")
 
     def model(self) -> EchoCNN:
+        """A new, untrained EchoCNN of this method's inputs, fusion and SoundNet depth.
+
+        Returns
+        -------
+        EchoCNN
+        """
         return EchoCNN(self.inputs, fusion=self.fusion, wave_layers=self.wave_layers)
 
     def path(self, run) -> Path:
-        """Where a run folder keeps this method's trained model."""
+        """Where a run folder keeps this method's trained model.
+
+        Parameters
+        ----------
+        run : str or path
+
+        Returns
+        -------
+        pathlib.Path
+            ``run/models/<slug>.pt`` (a CNN) or ``.pkl`` (a baseline).
+        """
         return Path(run) / "models" / f"{self.slug}.{'pt' if self.kind == 'cnn' else 'pkl'}"
 
 
@@ -84,6 +114,21 @@ PRODUCT_TEST_PROBES = ("vrecho", "random")
 
 
 def method(name: str) -> Method:
+    """The method of :data:`METHODS` with this name or slug.
+
+    Parameters
+    ----------
+    name : str
+
+    Returns
+    -------
+    Method
+
+    Raises
+    ------
+    VrechoError
+        When no method has this name or slug.
+    """
     for m in METHODS:
         if m.name == name or m.slug == name:
             return m
@@ -91,7 +136,22 @@ def method(name: str) -> Method:
 
 
 class Frames:
-    """The frames of one protocol and split, with every input any method asks for, loaded once."""
+    """The frames of one protocol and split, with every input any method asks for, loaded once.
+
+    Parameters
+    ----------
+    ds : Dataset
+    protocol : {"paper", "product"}
+    split : {"train", "val", "test"}
+    seed : int
+        Seeds the product protocol's probes and recording conditions.
+    progress : bool
+
+    Raises
+    ------
+    VrechoError
+        For an unknown protocol.
+    """
 
     def __init__(self, ds, protocol: str, split: str, *, seed: int = 0, progress: bool = False):
         self.ds, self.protocol, self.split, self.seed, self.progress = ds, protocol, split, seed, progress
@@ -120,7 +180,23 @@ class Frames:
         return self.audio
 
     def inputs(self, keys) -> dict[str, torch.Tensor]:
-        """Tensors for the given input names (``echo`` means ``envelope`` and ``bands``)."""
+        """Tensors for the given input names (``echo`` means ``envelope`` and ``bands``).
+
+        Parameters
+        ----------
+        keys : iterable of {"mel", "image", "wave", "echo", "envelope", "bands"}
+
+        Returns
+        -------
+        dict of str to torch.Tensor
+            ``mel`` (N, 62, 25), ``image`` (N, 64, 25) in [0, 1], ``wave`` (N, 11025) at
+            11.025 kHz, ``envelope`` (N, 1323) and ``bands`` (N, 7, 20); all float32.
+
+        Raises
+        ------
+        VrechoError
+            For echo features under the paper protocol (no emitted sound), or an unknown name.
+        """
         names = [k for key in keys for k in (("envelope", "bands") if key == "echo" else (key,))]
         for name in names:
             if name in self._x:
@@ -158,7 +234,19 @@ def _read_rows(array, rows: np.ndarray) -> np.ndarray:
 
 
 class Harness:
-    """Frames of every protocol and split, loaded on demand and shared by the methods."""
+    """Frames of every protocol and split, loaded on demand and shared by the methods.
+
+    Parameters
+    ----------
+    data : str or path
+    seed : int
+    progress : bool
+
+    Raises
+    ------
+    VrechoError
+        When ``data`` holds no finished dataset.
+    """
 
     def __init__(self, data, *, seed: int = 0, progress: bool = True):
         self.ds = open_dataset(data)
@@ -166,6 +254,17 @@ class Harness:
         self._frames: dict[tuple[str, str], Frames] = {}
 
     def frames(self, protocol: str, split: str) -> Frames:
+        """The :class:`Frames` of a protocol and split (made on first use, then kept).
+
+        Parameters
+        ----------
+        protocol : {"paper", "product"}
+        split : {"train", "val", "test"}
+
+        Returns
+        -------
+        Frames
+        """
         key = (protocol, split)
         if key not in self._frames:
             self._frames[key] = Frames(self.ds, protocol, split, seed=self.seed, progress=self.progress)
@@ -176,8 +275,32 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
                   progress: bool = True) -> dict[str, dict]:
     """Train every method (or those named) on a dataset, resumably, into the run folder ``out``.
 
-    Returns, per method, its training record (epochs, best epoch, seconds). When the methods of
-    :data:`SHIPPED` are all trained, writes ``classifier.pt`` (the classifier's weights).
+    A method already trained is skipped. When the methods of :data:`SHIPPED` are all trained,
+    writes ``classifier.pt`` (the classifier's weights).
+
+    Parameters
+    ----------
+    data, out : str or path
+        The dataset folder, and the run folder: empty, or a run of the same dataset and seed.
+    methods : list of str, optional
+        Names or slugs of :data:`METHODS` (default: all).
+    seed : int
+        Seeds the weights, the shuffling and the product protocol's frames.
+    epochs, patience : int
+        Most epochs per CNN (default 40; a method's ``max_epochs`` caps it), and epochs without
+        improvement before stopping (default 6).
+    progress : bool
+
+    Returns
+    -------
+    dict of str to dict
+        Per method trained in ``out``, its record: ``seconds``, ``seed``, ``n_train``, ``n_val``,
+        ``protocol``; for a CNN also ``epochs``, ``best_epoch`` (from 0) and ``val_loss``.
+
+    Raises
+    ------
+    VrechoError
+        For an unknown method, a missing or unfinished dataset, or an unwritable or foreign ``out``.
     """
     out = ensure_writable_dir(out)
     chosen = [method(m) for m in methods] if methods else list(METHODS)
@@ -224,6 +347,23 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
 
 
 def load_method(run, m: Method):
+    """A method's trained model from a run folder.
+
+    Parameters
+    ----------
+    run : str or path
+    m : Method
+
+    Returns
+    -------
+    EchoCNN or FeatureBaseline
+        A CNN in evaluation mode, or the fitted baseline.
+
+    Raises
+    ------
+    VrechoError
+        When ``m`` is not trained in ``run``.
+    """
     path = m.path(run)
     if not path.exists():
         raise VrechoError(f"{run}: {m.name} is not trained (no {path.name}); run `vrecho train` first")
@@ -236,7 +376,24 @@ def load_method(run, m: Method):
 
 
 def export_classifier(run, path) -> Path:
-    """Bundle the shipped methods' weights (float16, a few MB) into one file for the classifier."""
+    """Bundle the shipped methods' weights (float16, a few MB) into one file for the classifier.
+
+    Parameters
+    ----------
+    run : str or path
+        A run folder holding every method of :data:`SHIPPED`.
+    path : str or path
+        The bundle's file (written atomically).
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    VrechoError
+        When a method of :data:`SHIPPED` is not trained in ``run``.
+    """
     bundle = {}
     for key, name in SHIPPED.items():
         model = load_method(run, method(name))
@@ -252,15 +409,32 @@ def export_classifier(run, path) -> Path:
 # ----------------------------------------------------------------------------------------------
 # Evaluation: tables and figures
 
-COLUMNS = (("open", "open/closed %"), ("material", "material %"), ("depth_ft", "depth 1/2/3 ft %"),
-           ("depth_ft_closed", "closed: 1/2/3 ft %"), ("depth_bin", "depth 0.5 m %"),
-           ("depth_bin_closed", "closed: 0.5 m %"), ("depth_median_cm", "depth median cm"), ("depth_p90_cm", "depth p90 cm"),
-           ("src_cell", "source cell %"), ("src_median_m", "source median m"))
-
 
 def evaluate(data, run, out, *, seed: int = 0, progress: bool = True, methods=None) -> dict[str, dict]:
     """Judge every trained method on the test frames; write tables (Markdown and CSV), confusion
-    matrices and the activation-maximisation figure into ``out``. Returns the metrics."""
+    matrices and the activation-maximisation figure into ``out``.
+
+    Parameters
+    ----------
+    data, run, out : str or path
+        The dataset, the run (:func:`train_methods`) and the output folder (created if missing).
+    seed : int
+        Seeds the product protocol's test probes.
+    progress : bool
+    methods : list of str, optional
+        Names or slugs of :data:`METHODS` (default: every method trained in ``run``).
+
+    Returns
+    -------
+    dict of str to dict
+        Per method, :func:`vrecho.learn.train.metrics` on its test frames, with
+        ``seconds_per_frame`` and ``by_group`` (the same metrics per test sound or probe).
+
+    Raises
+    ------
+    VrechoError
+        For an unknown or untrained method, none trained in ``run``, a bad dataset or ``out``.
+    """
     out = ensure_writable_dir(out)
     harness = Harness(data, seed=seed, progress=progress)
     chosen = [method(m) for m in methods] if methods else [m for m in METHODS if _trained(run, m)]
@@ -297,183 +471,3 @@ def _trained(run, m: Method) -> bool:
     return m.path(run).exists()
 
 
-def _fmt(key: str, v: float) -> str:
-    if v != v:  # NaN: the head does not apply
-        return "-"
-    if key.endswith("_cm") or key.endswith("_m"):
-        return f"{v:.2f}" if key.endswith("_m") else f"{v:.1f}"
-    return f"{100 * v:.1f}"
-
-
-TABLES = {
-    "real": ("Real-scene protocol (the paper's Table 1): depth in 1/2/3 ft classes",
-             ("open", "material", "depth_ft", "depth_ft_closed", "depth_median_cm", "depth_p90_cm")),
-    "synthetic": ("Synthetic protocol (the paper's Table 2): depth in 0.5 m steps (+/- 0.25 m)",
-                  ("open", "material", "depth_bin", "depth_bin_closed", "depth_median_cm", "depth_p90_cm", "src_cell",
-                   "src_median_m")),
-}
-
-
-def write_tables(results: dict, methods, meta: dict, out: Path) -> None:
-    """``tables.md`` (the two paper tables per protocol and the per-sound breakdown) and
-    ``results.csv`` (every metric of every method)."""
-    names = dict(COLUMNS)
-    lines = [f"Seed {meta['seed']}; dataset {meta['data']}. Test: held-out sounds in unseen rooms (paper protocol); "
-             "vrecho's probe and random broadband probes in unseen rooms (product protocol). Depth errors on closed "
-             "surfaces (an opening returns no echo from its own plane).", ""]
-    for protocol in ("paper", "product"):
-        ms = [m for m in methods if m.protocol == protocol]
-        if not ms:
-            continue
-        n = meta["n"][protocol]
-        lines.append(f"## {protocol.capitalize()} protocol (train {n['train']}, val {n['val']}, test {n['test']} frames)")
-        lines.append("")
-        for title, keys in TABLES.values():
-            lines += [f"### {title}", "", "| method | " + " | ".join(names[k] for k in keys) + " |",
-                      "|---|" + "---:|" * len(keys)]
-            for m in ms:
-                r = results[m.name]
-                lines.append(f"| {m.name} | " + " | ".join(_fmt(k, r[k]) for k in keys) + " |")
-            lines.append("")
-        groups = sorted({g for m in ms for g in results[m.name]["by_group"]})
-        keys = ("open", "material", "depth_bin", "depth_median_cm")
-        lines += ["### Per test sound: " + ", ".join(names[k] for k in keys), "",
-                  "| sound | " + " | ".join(m.name for m in ms) + " |", "|---|" + "---:|" * len(ms)]
-        for g in groups:
-            cells = [" / ".join(_fmt(k, results[m.name]["by_group"].get(g, {}).get(k, float("nan"))) for k in keys)
-                     for m in ms]
-            lines.append(f"| {g} | " + " | ".join(cells) + " |")
-        lines.append("")
-    atomic_write_text(out / "tables.md", "\n".join(lines))
-    keys = [k for k in next(iter(results.values())) if k != "by_group"]
-    with open(out / "results.csv.tmp", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["method", "protocol", "group"] + keys)
-        for m in methods:
-            r = results[m.name]
-            w.writerow([m.name, m.protocol, "all"] + [r[k] for k in keys])
-            for g, rg in r["by_group"].items():
-                w.writerow([m.name, m.protocol, g] + [rg.get(k, "") for k in keys])
-    (out / "results.csv.tmp").replace(out / "results.csv")
-
-
-def confusion_figures(outputs: dict, methods, harness: Harness, out: Path) -> list[Path]:
-    """One PNG per class head: a confusion matrix per method (rows true, columns predicted,
-    normalised per true class)."""
-    import matplotlib  # heavy (0.8 s to import): only figures need it
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # once the Agg backend is chosen: no display needed
-    from sklearn.metrics import confusion_matrix  # heavy (1.7 s to import): only this figure needs it
-
-    labels = {"open": ("closed", "open"), "material": ("glass", "mirror"),
-              "depth_bin": tuple(f"{d:g}" for d in DEPTH_BINS_M), "depth_ft": ("1 ft", "2 ft", "3 ft")}
-    paths = []
-    for head in CLASS_HEADS:
-        n = len(methods)
-        cols = min(n, 4)
-        rows = (n + cols - 1) // cols
-        fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 3.0 * rows), squeeze=False)
-        for ax, m in zip(axes.flat, methods):
-            y = harness.frames(m.protocol, "test").y[head]
-            keep = y != -100
-            k = len(labels[head])
-            cm = confusion_matrix(y[keep].numpy(), outputs[m.name][head].argmax(1)[keep].numpy(), labels=range(k))
-            cmn = cm / np.maximum(cm.sum(axis=1, keepdims=True), 1)
-            ax.imshow(cmn, vmin=0, vmax=1, cmap="Blues")
-            for i in range(k):
-                for j in range(k):
-                    if k <= 3 or cm[i, j]:
-                        ax.text(j, i, f"{100 * cmn[i, j]:.0f}", ha="center", va="center", fontsize=7,
-                                color="white" if cmn[i, j] > 0.5 else "black")
-            ax.set_xticks(range(k), labels[head], fontsize=7, rotation=45 if k > 3 else 0)
-            ax.set_yticks(range(k), labels[head], fontsize=7)
-            ax.set_title(f"{m.name} ({m.protocol})", fontsize=8)
-        for ax in list(axes.flat)[n:]:
-            ax.axis("off")
-        fig.suptitle(f"Confusion matrices, {head.replace('_', ' ')} (rows: truth, columns: prediction, % of row)",
-                     fontsize=9)
-        fig.tight_layout()
-        path = out / f"confusion_{head}.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        paths.append(path)
-    return paths
-
-
-def activation_maximisation(models: dict[str, EchoCNN], path, *, steps: int = 300, seed: int = 0) -> Path:
-    """For each depth class of the depth head, the input that excites it most: gradient ascent on
-    the class logit with an L2 pull toward a neutral input and a smoothness penalty.
-
-    ``models`` maps a method name to its model: a log-mel model (EchoCNN-A) gets one row of
-    spectrograms; an echo model (EchoCNN-E) a panel of recovered impulse-response envelopes,
-    with each class's depth range marked where its echo should be.
-    """
-    import matplotlib  # heavy (0.8 s to import): only figures need it
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # once the Agg backend is chosen: no display needed
-
-    k = len(DEPTH_BINS_M)
-    idx = torch.arange(k)
-    fig, axes = plt.subplots(len(models), k, figsize=(2.3 * k, 2.8 * len(models)), squeeze=False)
-    for row, (name, model) in enumerate(models.items()):
-        model.eval()
-        for p in model.parameters():
-            p.requires_grad_(False)
-        g = torch.Generator().manual_seed(seed)
-        echo = "echo" in model.inputs
-        if echo:  # log10 envelope / 4: a direct sound at 0, a -60 dB floor
-            base = torch.full((k, 1323), -0.75)
-            base[:, :40] = 0.0
-            bands = torch.zeros(k, 7, 20)
-        else:
-            base = torch.zeros(k, 62, 25)
-        x = (base + 0.01 * torch.randn(base.shape, generator=g)).requires_grad_(True)
-
-        def objective(x):
-            """Per class: its logit (log-mel); for an echo model, the log share of the delay
-            attention that falls within the class's depth range (the unit the depth is read from)."""
-            if not echo:
-                return model({"mel": x})["depth_bin"][idx, idx]
-            out = model({"envelope": 10 ** (4 * x), "bands": bands})
-            logp = torch.log_softmax(out["delay_scores"], dim=1)
-            centres = torch.tensor(DEPTH_BINS_M)[:, None]
-            inside = (out["depth_at"][None] - centres).abs() <= 0.25
-            return torch.logsumexp(logp.masked_fill(~inside, -1e4), dim=1)
-
-        opt = torch.optim.Adam([x], lr=0.02)
-        for _ in range(steps):
-            rough = (x[..., 1:] - x[..., :-1]).pow(2).sum()
-            loss = -objective(x).sum() + 0.02 * (x - base).pow(2).sum() + (0.5 if echo else 0.05) * rough
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-        for p in model.parameters():
-            p.requires_grad_(True)
-        with torch.no_grad():
-            probs = torch.exp(objective(x)) if echo else torch.softmax(model({"mel": x})["depth_bin"], 1)[idx, idx]
-        a = x.detach().numpy()
-        for c, ax in enumerate(axes[row]):
-            title = f"{DEPTH_BINS_M[c]:g} m class ({'attention' if echo else 'p'}={probs[c]:.2f})"
-            if echo:
-                travel = SPEED_OF_SOUND * np.arange(a.shape[1]) / FS  # emitter -> surface -> microphone
-                ax.plot(np.sqrt(np.maximum(travel ** 2 - MIC_ABOVE_EMITTER_M ** 2, 0)) / 2, 80 * a[c], lw=0.7)
-                ax.axvspan(DEPTH_BINS_M[c] - 0.25, DEPTH_BINS_M[c] + 0.25, color="r", alpha=0.2)
-                ax.set_xlim(0, 3.5)
-                ax.set_xlabel("echo distance (m)", fontsize=7)
-                if c == 0:
-                    ax.set_ylabel(f"{name}\nenvelope (dB)", fontsize=7)
-            else:
-                lim = np.abs(a).max()
-                ax.imshow(a[c], origin="lower", aspect="auto", cmap="RdBu_r", vmin=-lim, vmax=lim, extent=(0, 1000, 0, 62))
-                ax.set_xlabel("time (ms)", fontsize=7)
-                if c == 0:
-                    ax.set_ylabel(f"{name}\nmel band", fontsize=7)
-            ax.set_title(title, fontsize=8)
-            ax.tick_params(labelsize=6)
-    fig.suptitle("Depth head, activation maximisation: the input that most excites each depth class", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)

@@ -16,13 +16,12 @@ import torch  # this module trains: torch is what it is for
 from tqdm import tqdm
 
 from ..camera import Camera, camera_pose
+from ..device import MIC_ABOVE_EMITTER_M
 from ..headset.view import WEIGHTS, material_probability, pane_crop, save
 from ..models import IGNORE, EchoCNN
-from ..scene import MIC_ABOVE_EMITTER_M
 from ..sim.render import World, render_view
 from ..sim.scenes import random_scene
 from .train import fit
-
 
 TRAIN_SEED = 31000
 """Training rooms are drawn from this seed up (never the benchmarks' 5000 and 6000)."""
@@ -30,11 +29,30 @@ TRAIN_SEED = 31000
 
 # -- Training data: simulated headsets in front of glass and mirrors ----------------------------------
 def headset_views(rng: np.random.Generator, name: str):
-    """The crops :func:`look` would classify, from one random room (PROTOCOL.md's rooms and
-    panes, :func:`vrecho.sim.scenes.random_scene`): for each glass or mirror that spans a head's
-    height, a few headset poses 0.5 to 3.5 m in front of it (head 1.45 to 1.85 m high, facing it
-    within 20 degrees, pitched and rolled a little), cameras of 60 to 110 degrees, the echo's
-    distance read to 2 cm. Yields (crop, is_mirror, distance_m)."""
+    """The crops :func:`~vrecho.headset.view.look` would classify, from one random room.
+
+    The rooms and panes are PROTOCOL.md's (:func:`vrecho.sim.scenes.random_scene`): for each
+    glass or mirror that spans a head's height, a few headset poses (up to 6) 0.5 to 3.5 m in
+    front of it (head 1.45 to 1.85 m high, facing it within 20 degrees, pitched by up to 8 and
+    rolled by up to 5 degrees), cameras 240, 320 or 400 pixels wide of 60 to 110 degrees, the
+    echo's distance read to 2 cm (a normal error of 2 cm standard deviation).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Draws the room and the poses.
+    name : str
+        The room's name.
+
+    Yields
+    ------
+    crop : numpy.ndarray, shape (64, 25), uint8
+        The pane's crop (:func:`vrecho.headset.view.pane_crop`).
+    is_mirror : bool
+        Whether the pane is a mirror (else glass).
+    distance_m : float
+        The true distance from the loudspeaker to the pane's plane, in metres.
+    """
     scene = random_scene(rng, name, n_poses=0, n_sources=0, n_discontinuities=(1, 3))
     room = scene.room
     world = None
@@ -74,8 +92,25 @@ def _room_views(seed: int) -> list:
 
 def make_dataset(n_rooms: int, *, seed: int = TRAIN_SEED, jobs: int = 1, progress: bool = True) -> dict[str, np.ndarray]:
     """Crops of ``n_rooms`` rooms drawn from ``seed`` on (room ``k`` from ``seed + k``, so the
-    data do not depend on ``jobs``, the processes that render them): ``crops`` (N, 64, 25) uint8,
-    ``mirror`` (N,) bool, ``distance_m`` (N,), ``room`` (N,)."""
+    data do not depend on ``jobs``, the processes that render them).
+
+    Parameters
+    ----------
+    n_rooms : int
+        Random rooms (:func:`headset_views`).
+    seed : int
+        The first room's seed (default :data:`TRAIN_SEED`).
+    jobs : int
+        Processes rendering the rooms (default 1).
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        ``crops`` (N, 64, 25) uint8, ``mirror`` (N,) bool, ``distance_m`` (N,) float in metres,
+        ``room`` (N,) int, the room's index from 0.
+    """
     seeds = range(seed, seed + n_rooms)
     out = {"crops": [], "mirror": [], "distance_m": [], "room": []}
     with get_context("spawn").Pool(jobs) as pool:
@@ -88,11 +123,32 @@ def make_dataset(n_rooms: int, *, seed: int = TRAIN_SEED, jobs: int = 1, progres
 
 
 def train(data: dict[str, np.ndarray], *, epochs: int = 60, seed: int = 0, progress: bool = True) -> tuple[EchoCNN, dict]:
-    """EchoCNN's visual branch trained on :func:`make_dataset`'s crops with
-    :func:`vrecho.learn.train.fit` (a tenth of the rooms held out for early stopping), its material
-    head alone: the other heads' targets are left out (a depth guessed from a picture only
-    distracts it). Crops are flipped left-right at random (a pane seen from either side).
-    Returns the model and its figures on the held-out rooms."""
+    """EchoCNN's visual branch trained on :func:`make_dataset`'s crops.
+
+    Trained with :func:`vrecho.learn.train.fit` (a tenth of the rooms held out for early
+    stopping, patience 8 epochs), its material head alone: the other heads' targets are left out
+    (a depth guessed from a picture only distracts it). The training crops are taken both as
+    they are and flipped left-right (a pane seen from either side).
+
+    Parameters
+    ----------
+    data : dict of str to numpy.ndarray
+        :func:`make_dataset`'s ``crops``, ``mirror`` and ``room``.
+    epochs : int
+        Most epochs (default 60).
+    seed : int
+        Seeds the held-out rooms, the weights and the training.
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    model : EchoCNN
+        ``inputs=("image",)``, 64 wide.
+    figures : dict
+        ``train_crops`` and ``val_crops`` (counts, before flipping), ``val_accuracy`` (0 to 1,
+        on the held-out rooms), ``epochs`` and ``seconds``.
+    """
     rooms = np.unique(data["room"])
     val_rooms = np.random.default_rng(seed).choice(rooms, max(1, len(rooms) // 10), replace=False)
     is_val = np.isin(data["room"], val_rooms)
@@ -122,6 +178,14 @@ def train(data: dict[str, np.ndarray], *, epochs: int = 60, seed: int = 0, progr
 
 
 def main(argv: list[str] | None = None) -> None:
+    """``python3 -m vrecho.learn.headset_view``: make (or load, with ``--data``) the crops, train
+    on them and save the weights to ``--out`` (the shipped file by default).
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments (default: the command line's).
+    """
     ap = argparse.ArgumentParser(prog="python3 -m vrecho.learn.headset_view",
                                  description="Train the headset view's glass/mirror model on simulated rooms.")
     ap.add_argument("--rooms", type=int, default=3000)

@@ -34,7 +34,6 @@ from localization.separate import analysis, steering
 from ..io import ensure_writable_dir
 from ..sim.ambient import random_walk, simulate_walk_capture
 
-
 SEED = 20_000
 """Training rooms' first seed."""
 
@@ -77,7 +76,30 @@ def _examples(args):
 
 def make_examples(data_dir: Path, *, rooms: int = 1200, jobs: int = 2, seed: int = SEED) -> list[Path]:
     """Simulate ``rooms`` training walks on ``jobs`` processes into ``data_dir`` (reused when
-    its shards were made for the same rooms and seed)."""
+    its shards were made for the same rooms, processes, seed and FFT size).
+
+    Parameters
+    ----------
+    data_dir : path
+        The shards' folder; created if missing.
+    rooms : int
+        Random shoebox walks (default 1200); room ``i`` is drawn from seed ``seed + i``.
+    jobs : int
+        Processes, one shard each (default 2).
+    seed : int
+        The first room's seed (default :data:`SEED`).
+
+    Returns
+    -------
+    list of pathlib.Path
+        The shards, ``data_dir/share<k>.npz`` for k below ``jobs``: float16 features ``f``,
+        microphone 0's magnitudes ``m`` and phase-sensitive targets ``t``, one row per source.
+
+    Raises
+    ------
+    VrechoError
+        When ``data_dir`` cannot be written.
+    """
     data_dir = Path(data_dir)
     ensure_writable_dir(data_dir)
     stamp = data_dir / "made.json"
@@ -113,11 +135,47 @@ def _load_examples(paths: list[Path], dev: str):
 def train(out: Path, *, rooms: int = 1200, epochs: int = 16, lr: float = 2e-3, init: Path | None = None,
           jobs: int = 2, seed: int = SEED, width: int = 32, data_dir: Path | None = None,
           progress: bool = True) -> list[float]:
-    """Simulate ``rooms`` training walks (into ``data_dir``, a temporary folder if None), train a
+    """Train the mask network on simulated walks and save its weights.
+
+    Simulate ``rooms`` training walks (into ``data_dir``, a temporary folder if None), train a
     network ``width`` channels wide (from ``init`` if given) for ``epochs`` with a one-cycle
-    schedule peaking at ``lr`` (on the GPU if there is one), and save the weights to ``out``.
-    Returns each epoch's validation loss (the last 5 % of examples): the masked magnitude's
-    error against the phase-sensitive target, in dB of the target's energy."""
+    schedule peaking at ``lr`` (on the GPU if there is one, in batches of 32; on the CPU in
+    batches of 8), and save the weights to ``out`` (float16, after every epoch).
+
+    Parameters
+    ----------
+    out : path
+        The weights' file; its folder must be writable.
+    rooms : int
+        Training walks (default 1200).
+    epochs : int
+        Default 16.
+    lr : float
+        The one-cycle schedule's peak learning rate (default 2e-3).
+    init : path, optional
+        Weights to start from.
+    jobs : int
+        Processes simulating the walks (default 2).
+    seed : int
+        The first room's seed (default :data:`SEED`).
+    width : int
+        The network's channels (default 32).
+    data_dir : path, optional
+        Where the simulated examples are kept and reused (:func:`make_examples`).
+    progress : bool
+        Show a progress bar per epoch.
+
+    Returns
+    -------
+    list of float
+        Each epoch's validation loss (the last 5 % of examples, at least 8): the masked
+        magnitude's error against the phase-sensitive target, in dB of the target's energy.
+
+    Raises
+    ------
+    VrechoError
+        When the folder of ``out`` or ``data_dir`` cannot be written.
+    """
     ensure_writable_dir(Path(out).parent)
     dev = "cuda" if torch.cuda.is_available() else "cpu"
     with tempfile.TemporaryDirectory() as tmp:
@@ -161,6 +219,8 @@ def train(out: Path, *, rooms: int = 1200, epochs: int = 16, lr: float = 2e-3, i
 
 
 def main():
+    """``python3 -m vrecho.learn.masknet``: :func:`train` with the command line's arguments
+    (``--out`` required), then the time it took."""
     ap = argparse.ArgumentParser(prog="python3 -m vrecho.learn.masknet", description="Train informed separation's mask network on simulated walks.")
     ap.add_argument("--rooms", type=int, default=1200)
     ap.add_argument("--epochs", type=int, default=16)

@@ -22,8 +22,28 @@ from ..models import CLASS_HEADS, DEPTH_BINS_M, DEPTH_FT_M, IGNORE, SRC_CELL_M, 
 
 
 def targets(labels: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, torch.Tensor]:
-    """Training targets of the given frames (see the module's docstring); heads that do not apply
-    to a frame's kind hold IGNORE (classes) or NaN (metres)."""
+    """Training targets of the given frames.
+
+    The targets are those of the module's docstring, plus the source's position; heads that do
+    not apply to a frame's kind hold IGNORE (classes) or NaN (metres).
+
+    Parameters
+    ----------
+    labels : dict of str to numpy.ndarray
+        A dataset's label columns (:func:`vrecho.learn.datasets.read_labels`), each of shape
+        (n_frames,).
+    rows : numpy.ndarray, shape (N,), int
+        The frames to take.
+
+    Returns
+    -------
+    dict of str to torch.Tensor
+        ``open``, ``material``, ``depth_bin``, ``depth_ft`` (N,) int64 classes (IGNORE where the
+        head does not apply); ``depth_m`` (N,) float32, metres (NaN for source frames);
+        ``src_cell`` (N, 3) int64, the source's 0.5 m grid cell per axis (IGNORE for echo frames);
+        ``src_m`` (N, 3) float32, the source's position in metres in the device frame (NaN for
+        echo frames).
+    """
     rows = np.asarray(rows)
     echo = labels["kind"][rows] == "echo"
     depth = np.where(echo, labels["depth_m"][rows], np.nan)
@@ -53,8 +73,27 @@ def _axis_logits(scores: torch.Tensor) -> list[torch.Tensor]:
 
 
 def loss_fn(out: dict[str, torch.Tensor], y: dict[str, torch.Tensor], *, depth_weight: float = 2.0) -> torch.Tensor:
-    """Sum of the heads' losses over the frames each applies to: cross-entropy for classes, smooth
-    L1 on depth (closed surfaces) and on source position, in metres."""
+    """Sum of the heads' losses over the frames each applies to.
+
+    Cross-entropy for classes, smooth L1 on depth (closed surfaces) and on source position, in
+    metres. An echo model's delay attention (``delay_scores``) also takes a cross-entropy toward
+    the true echo's delay on closed surfaces, and the source-cell head one cross-entropy per axis
+    (a third each).
+
+    Parameters
+    ----------
+    out : dict of str to torch.Tensor
+        EchoCNN's outputs for B frames (:class:`vrecho.models.EchoCNN`).
+    y : dict of str to torch.Tensor
+        The frames' targets (:func:`targets`).
+    depth_weight : float
+        Weight of the depth loss (default 2.0).
+
+    Returns
+    -------
+    torch.Tensor, shape ()
+        The summed loss (differentiable).
+    """
     loss = out["open"].sum() * 0.0
     d = torch.isfinite(y["depth_m"]) & (y["open"] == 0)  # an opening sends no echo from its plane
     if d.any():
@@ -75,6 +114,20 @@ def loss_fn(out: dict[str, torch.Tensor], y: dict[str, torch.Tensor], *, depth_w
 
 @dataclass
 class History:
+    """What :func:`fit` did.
+
+    Attributes
+    ----------
+    epochs : int
+        Epochs run (a resumed run's included).
+    best_epoch : int
+        The epoch (from 0) of the best validation loss; -1 if none ran.
+    best_val_loss : float
+        That loss (inf if no epoch ran).
+    seconds : float
+        Training time in seconds, over every run of a resumed training.
+    """
+
     epochs: int
     best_epoch: int
     best_val_loss: float
@@ -86,7 +139,23 @@ def _subset(x: dict[str, torch.Tensor], idx) -> dict[str, torch.Tensor]:
 
 
 def predict_batches(model: EchoCNN, x: dict[str, torch.Tensor], *, batch_size: int = 256) -> dict[str, torch.Tensor]:
-    """The model's outputs for many frames, in evaluation mode, a batch at a time."""
+    """The model's outputs for many frames, in evaluation mode, a batch at a time.
+
+    Parameters
+    ----------
+    model : EchoCNN
+        Put in evaluation mode (``model.eval()``) and left so.
+    x : dict of str to torch.Tensor
+        The model's inputs, each with N frames on its first axis.
+    batch_size : int
+        Frames per forward pass (default 256).
+
+    Returns
+    -------
+    dict of str to torch.Tensor
+        Each output head concatenated over the N frames; ``depth_at`` (an echo model's delay
+        grid, in metres) as the first batch gave it.
+    """
     model.eval()
     n = len(next(iter(x.values())))
     parts = []
@@ -106,6 +175,42 @@ def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, 
     interrupted at any point resumes from its last finished epoch with the same result: each
     epoch's shuffling and dropout are seeded by ``(seed, epoch)``. A checkpoint that stopped early
     just loads its best weights; one that ran out of epochs goes on if given more.
+
+    Parameters
+    ----------
+    model : EchoCNN
+        Trained in place; it ends with the best weights, in evaluation mode.
+    x_train, x_val : dict of str to torch.Tensor
+        The model's inputs, frames on the first axis.
+    y_train, y_val : dict of str to torch.Tensor
+        Their targets (:func:`targets`).
+    epochs : int
+        Most epochs (default 40).
+    batch_size : int
+        Frames per step (default 64; a last batch of one frame is skipped).
+    lr : float
+        Adam's learning rate (default 1e-3).
+    patience : int
+        Epochs without an improvement of the validation loss (by more than 1e-4) before stopping
+        (default 6).
+    seed : int
+        Seeds each epoch's shuffling and dropout with the epoch.
+    checkpoint : str or path, optional
+        The file to write each epoch's state to, and to resume from.
+    progress : bool
+        Show a progress bar.
+    desc : str
+        The progress bar's label.
+
+    Returns
+    -------
+    History
+        Epochs run, best epoch, its validation loss, seconds.
+
+    Raises
+    ------
+    VrechoError
+        When ``checkpoint`` holds another model (another config).
     """
     n = len(next(iter(y_train.values())))
     opt = torch.optim.Adam(model.parameters(), lr=lr)
@@ -166,15 +271,42 @@ def _atomic_torch_save(obj, path: Path) -> None:
 
 
 def src_cell_of(scores: torch.Tensor) -> torch.Tensor:
-    """(B, 3) grid cell chosen by the source-cell head's scores."""
+    """(B, 3) grid cell chosen by the source-cell head's scores.
+
+    Parameters
+    ----------
+    scores : torch.Tensor, shape (B, 60)
+        The ``src_cell`` head's logits, the three axes' concatenated (24, 24 and 12 cells).
+
+    Returns
+    -------
+    torch.Tensor, shape (B, 3), int64
+        The cell chosen on each axis.
+    """
     return torch.stack([logits.argmax(1) for logits in _axis_logits(scores)], dim=1)
 
 
 def metrics(out: dict[str, torch.Tensor], y: dict[str, torch.Tensor]) -> dict[str, float]:
     """Accuracy of each class head on the frames it applies to, with their counts; depth errors
-    in cm, and depth-class accuracy (``*_closed``), on closed surfaces (an opening sends no echo from its own plane: its depth is reported
-    apart, as ``depth_all_*``, over every echo frame); source cell accuracy (all three axes right)
-    and position errors in metres."""
+    in cm, and depth-class accuracy (``*_closed``), on closed surfaces (an opening sends no echo
+    from its own plane: its depth is reported apart, as ``depth_all_*``, over every echo frame);
+    source cell accuracy (all three axes right) and position errors in metres.
+
+    Parameters
+    ----------
+    out : dict of str to torch.Tensor
+        A model's outputs for N frames (EchoCNN's heads, or a baseline's scores shaped alike).
+    y : dict of str to torch.Tensor
+        Their targets (:func:`targets`).
+
+    Returns
+    -------
+    dict of str to float
+        ``open``, ``material``, ``depth_bin``, ``depth_ft`` (accuracy, 0 to 1) and ``n_<head>``;
+        ``depth_bin_closed``, ``depth_ft_closed``; ``depth_median_cm``, ``depth_p90_cm``,
+        ``n_depth`` and the same for ``depth_all``; ``src_cell`` (0 to 1), ``src_median_m``,
+        ``src_p90_m``, ``n_src``. NaN where no frame applies.
+    """
     def accuracy(head, keep):
         return float((out[head].argmax(1)[keep] == y[head][keep]).float().mean()) if keep.any() else float("nan")
 

@@ -24,11 +24,29 @@ from .scan import Echoes
 
 @dataclass
 class Decision:
-    """What a hole is judged to be: ``state`` closed, open or unknown (no frame looked at it),
-    ``material`` (glass or mirror, for closed holes), ``offset_m`` (the plane of the surface:
-    points x with normal . x + offset = 0, normal into the room), ``p_closed``, ``p_mirror``,
-    ``confidence`` (probability of the answer given), ``source`` (echocnn or oracle) and the
-    per-frame inferences it was combined from, and the scan's ``evidence`` (see :func:`infer`)."""
+    """What a hole is judged to be.
+
+    Parameters
+    ----------
+    state : str
+        ``"closed"``, ``"open"`` or ``"unknown"`` (no frame looked at it).
+    material : str or None
+        ``"glass"`` or ``"mirror"`` for closed holes, else None.
+    offset_m : float or None
+        The plane of the surface, in metres: points x with normal . x + offset = 0, normal into
+        the room (the hole's wall's). None unless closed.
+    p_closed, p_mirror : float
+        Probabilities that the hole is closed, and that a closed surface is a mirror.
+    confidence : float
+        Probability of the answer given (open or closed).
+    source : str
+        Who decided: ``"echocnn+scan"``, ``"echocnn"`` (:func:`infer`) or ``"oracle"`` (the
+        simulator's :class:`~vrecho.sim.scoring.Oracle`).
+    frames : list of dict
+        The per-frame inferences it was combined from (see :func:`infer`); empty by default.
+    evidence : dict
+        The scan's evidence (see :func:`infer`); empty by default.
+    """
 
     state: str
     material: str | None
@@ -74,7 +92,8 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
 
     Each frame's recording goes to EchoCNN with the known probe (EchoCNN-E), and with the
     camera's crop around the hole when the frame holds all of it (EchoCNN-EV). Up to
-    ``max_frames`` frames per hole, the most frontal first, are combined.
+    ``max_frames`` frames per hole, the most frontal first, are combined; only frames with a
+    recording count, and a hole no such frame faces is ``"unknown"``.
 
     With ``use_scan`` (vrecho's choice) the scan adds what it knows, by physics: the wall around
     the hole is scanned, so the delay of a closed surface's echo is known; the level there
@@ -84,9 +103,48 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
     joins EchoCNN's open/closed log-odds, and the depth comes from the
     EchoCNN echo when it agrees with the scan within 10 cm, else from the echo nearest the
     scan's delay. The geometry seen through the hole, reflected in its plane
-    (:func:`mirror_evidence`), says mirror or not where it is clear; EchoCNN's material answers
-    otherwise. Without ``use_scan``: EchoCNN alone (probabilities averaged, depth the median
-    of the frames' EchoCNN depths weighted by their closed probability).
+    (:func:`mirror_evidence`), says mirror or not where it is clear (200 or more vertices seen
+    through), and glass where almost nothing is seen through (fewer than 50: a mirror always
+    shows its phantom); EchoCNN's material answers otherwise. Without ``use_scan``: EchoCNN
+    alone (probabilities averaged, depth the median of the frames' EchoCNN depths weighted by
+    their closed probability; with it, the frames' chosen depths are weighted so).
+
+    Parameters
+    ----------
+    holes_ : list of :class:`~.discontinuities.Hole`
+        The holes to decide.
+    views : list of :class:`~vrecho.camera.View`
+        The scan's frames.
+    echoes : :class:`~.scan.Echoes`
+        What the device heard, by frame.
+    classifier : vrecho.classifier.Classifier, optional
+        EchoCNN (the shipped weights by default, :func:`vrecho.classifier.load_classifier`).
+    mesh : open3d.geometry.TriangleMesh, optional
+        The scan's mesh, for the mirror test; without it the mirror test is left out.
+    walls : list of :class:`~.discontinuities.Plane`
+        The room's walls, for the mirror test.
+    use_scan : bool
+        Add the scan's evidence (default True, vrecho's choice).
+    min_crop_inside : float
+        Smallest share of the crop within the frame for it to go to EchoCNN (default 0.98).
+    max_frames : int
+        Most frames combined per hole (default 6).
+
+    Returns
+    -------
+    list of :class:`Decision`
+        One per hole, in order. Each frame's row in :attr:`Decision.frames` holds ``frame``,
+        ``model``, ``p_closed``, ``p_mirror``, ``echo_depth_m`` (EchoCNN's), ``scan_depth_m``
+        (emitter to the wall's plane), ``depth_m`` (the one used) and ``offset_m`` (metres);
+        with ``use_scan`` also ``echo_level_db``, ``echo_at_scan_m`` and ``foot_in_hole``.
+        :attr:`Decision.evidence` holds ``echo_level_db``, ``echo_frames`` and
+        ``echo_levels_db`` (where a specular point fell in the hole) and ``mirrored_share`` and
+        ``seen_through_vertices`` (with a mesh); empty without ``use_scan``.
+
+    Raises
+    ------
+    VrechoError
+        From EchoCNN, for a recording it cannot take (a silent frame, or one not 1 s long).
     """
     if classifier is None:
         from ..classifier import load_classifier  # torch-bound (1.7 s): only when EchoCNN is asked
@@ -161,9 +219,33 @@ def mirror_evidence(mesh, hole: Hole, walls: list[Plane], cameras: np.ndarray, *
     surfaces (in front of every wall), and how many vertices were seen through. A mirror hangs a
     few centimetres off its wall, and a scanned surface lies within a voxel of the truth (the
     reflection is off by twice the plane's error): the mirror's plane is tried at the wall's
-    plane moved by each of ``shifts_m`` (positive: toward the room), and the best share counts (on the
-    tuning rooms of seeds 1000 and 3000: openings 0.09 at most, glass 0.06, mirrors 0.19 and
-    above).
+    plane moved by each of ``shifts_m`` (positive: away from the room), and the best share counts
+    (on the tuning rooms of seeds 1000 and 3000: openings 0.09 at most, glass 0.06, mirrors 0.19
+    and above).
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh
+        The scan's mesh (its vertices are used).
+    hole : :class:`~.discontinuities.Hole`
+        The hole.
+    walls : list of :class:`~.discontinuities.Plane`
+        The room's walls; the room's own surfaces are the vertices less than 5 cm behind every
+        wall.
+    cameras : numpy.ndarray [shape=(M, 3)], float
+        Camera positions in metres (what was seen through, :func:`seen_through`).
+    tolerance_m : float
+        How near, in metres, a reflected vertex must land to the room's (default 0.06).
+    shifts_m : numpy.ndarray [shape=(S,)], float
+        Shifts of the mirror's plane from the wall's, in metres (default -0.06 to 0.06 in 2 cm
+        steps).
+
+    Returns
+    -------
+    share : float
+        The best share in [0, 1]; 0 when fewer than 50 vertices were seen through.
+    count : int
+        How many vertices were seen through the hole.
     """
     v = np.asarray(mesh.vertices)
     through = v[seen_through(v, hole, cameras)]
@@ -183,8 +265,23 @@ def mirror_evidence(mesh, hole: Hole, walls: list[Plane], cameras: np.ndarray, *
 
 class EchoCNNOnly:
     """EchoCNN alone (``labels="echocnn-only"``): its answers averaged over the frames facing
-    each hole (:func:`infer` without the scan's evidence). ``classifier``: the shipped one by
-    default. Called as every decider is: ``decider(holes, views, echoes, mesh=..., walls=...)``."""
+    each hole (:func:`infer` without the scan's evidence). Called as every decider is:
+    ``decider(holes, views, echoes, mesh=..., walls=...)``.
+
+    Parameters
+    ----------
+    classifier : vrecho.classifier.Classifier, optional
+        EchoCNN; the shipped one by default (loaded by :func:`infer` at each call).
+
+    Attributes
+    ----------
+    label : str
+        Its name in :data:`LABELS`.
+    use_scan : bool
+        Whether :func:`infer` adds the scan's evidence.
+    hears : bool
+        Deciders that read the recordings say so: the pipeline hears the frames for them.
+    """
 
     label = "echocnn-only"
     use_scan = False
@@ -196,12 +293,38 @@ class EchoCNNOnly:
 
     def __call__(self, holes: list[Hole], views: list[View], echoes: Echoes, *, mesh=None,
                  walls: list[Plane] = ()) -> list[Decision]:
+        """Decide each hole (:func:`infer`).
+
+        Parameters
+        ----------
+        holes : list of :class:`~.discontinuities.Hole`
+            The holes to decide.
+        views : list of :class:`~vrecho.camera.View`
+            The scan's frames.
+        echoes : :class:`~.scan.Echoes`
+            What the device heard, by frame.
+        mesh : open3d.geometry.TriangleMesh, optional
+            The scan's mesh, for the mirror test (used with the scan's evidence).
+        walls : list of :class:`~.discontinuities.Plane`
+            The room's walls.
+
+        Returns
+        -------
+        list of :class:`Decision`
+            One per hole, in order.
+        """
         return infer(holes, views, echoes, classifier=self.classifier, mesh=mesh, walls=walls, use_scan=self.use_scan)
 
 
 class EchoCNNWithScan(EchoCNNOnly):
     """vrecho's choice (``labels="echocnn"``): EchoCNN with what the scan adds by physics (see
-    :func:`infer`)."""
+    :func:`infer`). Built and called as :class:`EchoCNNOnly`.
+
+    Parameters
+    ----------
+    classifier : vrecho.classifier.Classifier, optional
+        EchoCNN; the shipped one by default (loaded by :func:`infer` at each call).
+    """
 
     label = "echocnn"
     use_scan = True

@@ -18,8 +18,17 @@ from ..geometry import signed_area
 
 @dataclass
 class Plane:
-    """A planar surface found in the scan: unit ``normal`` pointing into the room (toward the
-    cameras), ``offset`` (points x with normal . x + offset = 0) and the inlier vertices."""
+    """A planar surface found in the scan.
+
+    Parameters
+    ----------
+    normal : numpy.ndarray [shape=(3,)], float
+        Unit normal, pointing into the room (toward the cameras).
+    offset : float
+        The plane's offset in metres: points x with normal . x + offset = 0.
+    inliers : numpy.ndarray [shape=(M, 3)], float
+        The scan's vertices on the plane, world coordinates in metres.
+    """
 
     normal: np.ndarray
     offset: float
@@ -27,21 +36,56 @@ class Plane:
 
     @property
     def vertical(self) -> bool:
+        """Whether the plane is vertical: its normal's z below 0.1 (6 degrees off horizontal)."""
         return abs(self.normal[2]) < 0.1
 
     def frame(self) -> tuple[np.ndarray, np.ndarray]:
-        """In-plane unit axes of a vertical plane: along the wall (the direction of the scene's own
-        wall axis, so crops are not mirrored), and up."""
+        """In-plane unit axes of a vertical plane: along the wall, and up.
+
+        Along the wall is the direction of the scene's own wall axis (normal x up), so crops are
+        not mirrored.
+
+        Returns
+        -------
+        along, up : numpy.ndarray [shape=(3,)], float
+            Unit vectors in world coordinates; ``up`` is the world's z.
+        """
         up = np.array([0.0, 0.0, 1.0])
         along = np.cross(self.normal, up)
         return along / np.linalg.norm(along), up
 
     def to_wall(self, points: np.ndarray) -> np.ndarray:
-        """Wall coordinates (N, 2) (along, up; see :meth:`frame`) of world points (N, 3)."""
+        """Wall coordinates of world points.
+
+        Parameters
+        ----------
+        points : numpy.ndarray [shape=(N, 3) or (3,)], float
+            World points in metres.
+
+        Returns
+        -------
+        numpy.ndarray [shape=(N, 2)], float
+            Their coordinates along the wall and up (see :meth:`frame`): dot products with
+            those axes, in metres.
+        """
         return np.atleast_2d(points) @ np.stack(self.frame(), axis=1)
 
     def to_world(self, uz: np.ndarray, offset: float | None = None) -> np.ndarray:
-        """World points (N, 3) of wall coordinates (N, 2), on the plane (or at another ``offset``)."""
+        """World points of wall coordinates, on the plane (or at another ``offset``).
+
+        Parameters
+        ----------
+        uz : numpy.ndarray [shape=(N, 2) or (2,)], float
+            Coordinates along the wall and up (see :meth:`frame`), in metres.
+        offset : float, optional
+            Offset in metres of a parallel plane to place the points on (same normal); the
+            plane's own by default.
+
+        Returns
+        -------
+        numpy.ndarray [shape=(N, 3)], float
+            World points in metres.
+        """
         along, up = self.frame()
         offset = self.offset if offset is None else offset
         uz = np.atleast_2d(uz)
@@ -50,9 +94,31 @@ class Plane:
 
 @dataclass
 class Hole:
-    """An empty region of a wall plane, seen through by the depth camera: its ``outline`` (K, 2),
-    a convex polygon in the wall's frame (``u`` along the wall, ``z`` up, metres; see
-    :meth:`Plane.frame`), its area and the plane."""
+    """An empty region of a wall plane, seen through by the depth camera.
+
+    Parameters
+    ----------
+    plane : Plane
+        The wall the hole is in.
+    outline : numpy.ndarray [shape=(K, 2)], float
+        A convex polygon in the wall's frame (``u`` along the wall, ``z`` up, metres; see
+        :meth:`Plane.frame`).
+    area_m2 : float
+        Its area in square metres (of the empty cells found, :func:`holes`).
+
+    Examples
+    --------
+    A 1 m square hole in a wall at x = 2 m, facing a room at the origin:
+
+    >>> import numpy as np
+    >>> from vrecho.reconstruct import Hole, Plane
+    >>> wall = Plane(np.array([-1.0, 0.0, 0.0]), 2.0, np.zeros((0, 3)))
+    >>> hole = Hole(wall, np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]), 1.0)
+    >>> hole.contains(np.array([[2.0, 0.5, 0.5], [2.0, 1.5, 0.5]]))
+    array([ True, False])
+    >>> hole.corners().shape
+    (4, 3)
+    """
 
     plane: Plane
     outline: np.ndarray
@@ -60,23 +126,57 @@ class Hole:
 
     @property
     def u(self) -> tuple[float, float]:
+        """The outline's extent along the wall (lowest, highest), in metres."""
         return float(self.outline[:, 0].min()), float(self.outline[:, 0].max())
 
     @property
     def z(self) -> tuple[float, float]:
+        """The outline's extent up the wall (lowest, highest), in metres."""
         return float(self.outline[:, 1].min()), float(self.outline[:, 1].max())
 
     def corners(self) -> np.ndarray:
-        """Bounding rectangle (4, 3), wound like the scene's walls: (u0, z0), (u1, z0), (u1, z1), (u0, z1)."""
+        """The outline's bounding rectangle in the world.
+
+        Returns
+        -------
+        numpy.ndarray [shape=(4, 3)], float
+            World corners in metres, wound like the scene's walls: (u0, z0), (u1, z0), (u1, z1),
+            (u0, z1), with ``u0, u1 =`` :attr:`u` and ``z0, z1 =`` :attr:`z`.
+        """
         (u0, u1), (z0, z1) = self.u, self.z
         return self.plane.to_world(np.array([[u0, z0], [u1, z0], [u1, z1], [u0, z1]]))
 
     def polygon(self, offset: float | None = None) -> np.ndarray:
-        """The outline in world coordinates (K, 3)."""
+        """The outline in world coordinates.
+
+        Parameters
+        ----------
+        offset : float, optional
+            Offset in metres of a parallel plane to place it on (see :meth:`Plane.to_world`);
+            the wall's own by default.
+
+        Returns
+        -------
+        numpy.ndarray [shape=(K, 3)], float
+            The outline's vertices in metres.
+        """
         return self.plane.to_world(self.outline, offset)
 
     def contains(self, points: np.ndarray, *, margin_m: float = 0.0) -> np.ndarray:
-        """Whether world points project into the outline (convex; widened by about ``margin_m``)."""
+        """Whether world points project into the outline (convex; widened by about ``margin_m``).
+
+        Parameters
+        ----------
+        points : numpy.ndarray [shape=(N, 3) or (3,)], float
+            World points in metres; they are projected on the wall along its normal.
+        margin_m : float
+            How far, in metres, each edge is moved outward (negative: inward) before the test
+            (default 0).
+
+        Returns
+        -------
+        numpy.ndarray [shape=(N,)], bool
+        """
         uz = self.plane.to_wall(points)
         a = self.outline
         e = np.roll(a, -1, axis=0) - a
@@ -90,7 +190,35 @@ def wall_planes(vertices: np.ndarray, cameras: np.ndarray, *, distance_m: float 
                 max_planes: int = 20, seed: int = 0) -> list[Plane]:
     """The room's walls: planes found by RANSAC (open3d ``segment_plane``), one after another, of
     which the vertical ones nearest the cameras in each direction are kept (a phantom room
-    behind a mirror, or buildings through a window, lie farther along the same directions)."""
+    behind a mirror, or buildings through a window, lie farther along the same directions).
+
+    Of the vertical planes, only dense surfaces are kept (at least a tenth as dense as the
+    densest); points seen only through another plane are dropped; a plane much smaller than
+    another facing the same way, or with a camera behind it, is no wall; coplanar pieces of a
+    wall (a door splits it) are merged. Walls are refitted exactly vertical. The vertices are
+    put in a canonical order first, so the result does not depend on theirs.
+
+    Parameters
+    ----------
+    vertices : numpy.ndarray [shape=(N, 3)], float
+        The scan's mesh vertices, world coordinates in metres (z up).
+    cameras : numpy.ndarray [shape=(M, 3)], float
+        Camera positions of the walkthrough, in metres.
+    distance_m : float
+        RANSAC's inlier distance to a plane, in metres (default 0.03).
+    min_share : float
+        Fewest inliers of a plane, as a share of ``vertices`` (default 0.003).
+    max_planes : int
+        Most planes RANSAC draws (default 20).
+    seed : int
+        open3d's random seed, for repeatable walls.
+
+    Returns
+    -------
+    list of Plane
+        One vertical wall per direction, normals toward the cameras, nearest the cameras'
+        centre first.
+    """
     import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 
     o3d.utility.random.seed(seed)
@@ -216,7 +344,30 @@ def holes(plane: Plane, views: list[View], walls: list[Plane] = (), *, cell_m: f
     when more frames saw through it than saw the wall. Free space carved this way tells a hole
     from a part of the wall no frame looked at, and needs no dense mesh around the hole. Cells
     behind another of the room's ``walls`` are not the room's: a mirror's phantom room has walls
-    in this plane too.
+    in this plane too. Single empty cells (at depth edges) are removed by a morphological opening
+    before the empty cells are grouped into connected regions.
+
+    Parameters
+    ----------
+    plane : Plane
+        The wall (from :func:`wall_planes`).
+    views : list of :class:`~vrecho.camera.View`
+        The depth frames (z-depth in metres, 0 where the sensor returned nothing).
+    walls : list of Plane
+        The room's walls (``plane`` may be among them); none by default.
+    cell_m : float
+        Side of a raster cell in metres (default 0.03).
+    min_area_m2 : float
+        Smallest hole kept, in square metres (default 0.1).
+    margin_m : float
+        Tolerance in metres: a depth reading within it of a cell agrees with the wall, one more
+        than it beyond the cell saw through; and how far behind another wall a cell must lie to
+        be left out (default 0.1).
+
+    Returns
+    -------
+    list of Hole
+        One per connected region of empty cells, its outline the convex hull of the cells.
     """
     uz = plane.to_wall(plane.inliers)
     lo, hi = uz.min(axis=0) - [0.0, 0.3], uz.max(axis=0) + [0.0, 0.3]
@@ -255,7 +406,22 @@ def holes(plane: Plane, views: list[View], walls: list[Plane] = (), *, cell_m: f
 
 def beyond_walls(vertices: np.ndarray, walls: list[Plane], *, margin_m: float = 0.1) -> np.ndarray:
     """Which vertices lie more than ``margin_m`` behind a wall plane: what the camera saw through
-    glass or an opening, or the phantom room a mirror makes (the repair tells them apart)."""
+    glass or an opening, or the phantom room a mirror makes (the repair tells them apart).
+
+    Parameters
+    ----------
+    vertices : numpy.ndarray [shape=(N, 3)], float
+        World points in metres.
+    walls : list of Plane
+        The room's walls, normals into the room.
+    margin_m : float
+        How far behind a wall, in metres, a vertex must lie (default 0.1).
+
+    Returns
+    -------
+    numpy.ndarray [shape=(N,)], bool
+        True for vertices behind any wall.
+    """
     v = np.asarray(vertices, float)
     out = np.zeros(len(v), bool)
     for w in walls:
@@ -266,7 +432,28 @@ def beyond_walls(vertices: np.ndarray, walls: list[Plane], *, margin_m: float = 
 def facing(views: list[View], hole: Hole, *, max_incidence_deg: float = 25.0,
            depth_range_m: tuple[float, float] = (0.25, 3.5), margin_m: float = 0.05) -> list[int]:
     """Frames that look at a hole: the camera's axis meets its outline (widened by ``margin_m``)
-    within ``max_incidence_deg`` of the wall's normal, from ``depth_range_m`` (EchoCNN's range)."""
+    within ``max_incidence_deg`` of the wall's normal, from ``depth_range_m`` (about EchoCNN's
+    range).
+
+    Parameters
+    ----------
+    views : list of :class:`~vrecho.camera.View`
+        The frames, camera-to-world poses in metres.
+    hole : Hole
+        The hole.
+    max_incidence_deg : float
+        Largest angle, in degrees, between the camera's axis and the wall's normal (default 25).
+    depth_range_m : tuple of float
+        Nearest and farthest distance in metres from the camera to the wall's plane, along the
+        normal (default 0.25 to 3.5 m).
+    margin_m : float
+        How far the outline is widened, in metres (default 0.05).
+
+    Returns
+    -------
+    list of int
+        Indices into ``views``, in their order.
+    """
     n, offset = hole.plane.normal, hole.plane.offset
     out = []
     for i, view in enumerate(views):
@@ -282,9 +469,28 @@ def facing(views: list[View], hole: Hole, *, max_incidence_deg: float = 25.0,
 
 def seen_through(points: np.ndarray, hole: Hole, cameras: np.ndarray, *, margin_m: float = 0.1,
                  max_cameras: int = 12) -> np.ndarray:
-    """Which points (bool (N,)) lie behind a hole's plane where a camera saw them through the
-    hole: the line from some camera (at most ``max_cameras`` of those in front, evenly spread)
-    to the point crosses the hole's outline (widened by 5 cm)."""
+    """Which points lie behind a hole's plane where a camera saw them through the hole: the line
+    from some camera (at most ``max_cameras`` of those in front, evenly spread) to the point
+    crosses the hole's outline (widened by 5 cm).
+
+    Parameters
+    ----------
+    points : numpy.ndarray [shape=(N, 3)], float
+        World points in metres.
+    hole : Hole
+        The hole.
+    cameras : numpy.ndarray [shape=(M, 3)], float
+        Camera positions in metres; those less than 0.1 m in front of the hole's plane are not
+        used.
+    margin_m : float
+        How far behind the plane, in metres, a point must lie (default 0.1).
+    max_cameras : int
+        Most cameras tried (default 12).
+
+    Returns
+    -------
+    numpy.ndarray [shape=(N,)], bool
+    """
     n, offset = hole.plane.normal, hole.plane.offset
     cams = np.asarray(cameras, float)
     cams = cams[cams @ n + offset > 0.1]

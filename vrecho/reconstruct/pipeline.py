@@ -23,7 +23,30 @@ from .scan import Scan
 
 @dataclass
 class Reconstruction:
-    """Everything a run found and did; :meth:`report` is its JSON."""
+    """Everything a run of :func:`reconstruct` found and did; :meth:`report` is its JSON.
+
+    Parameters
+    ----------
+    scan : :class:`~.scan.Scan`
+        The scan worked on, with the recordings the decision heard.
+    walls : list of :class:`~.discontinuities.Plane`
+        The room's walls.
+    holes : list of :class:`~.discontinuities.Hole`
+        The holes found in them.
+    decisions : list of :class:`~.decide.Decision`
+        What each hole is, one per hole.
+    repaired : open3d.geometry.TriangleMesh
+        The repaired mesh.
+    surfaces : list of :class:`~.repair.Surface`
+        The surfaces the repair added.
+    actions : list of dict
+        What the repair did to each hole (see :func:`~.repair.repair`).
+    variant : str
+        The repair's fill, ``"simplified"`` or ``"per_vertex"``.
+    seconds : dict
+        Time taken per step, in seconds: ``discontinuities``, ``hear`` (where the device was
+        heard), ``decide``, ``repair`` and ``total_without_hearing``.
+    """
 
     scan: Scan
     walls: list[Plane]
@@ -36,6 +59,17 @@ class Reconstruction:
     seconds: dict
 
     def report(self) -> dict:
+        """The run as JSON-ready data (format ``"vrecho-reconstruction"``, version 1).
+
+        Returns
+        -------
+        dict
+            The variant, who decided (``labels``, the first decision's source), the initial and
+            repaired meshes' vertex and triangle counts, the walls, each hole (its wall, area in
+            square metres, world outline in metres, decision with its frames and evidence, and
+            action), the added surfaces and the seconds per step. Numbers are rounded to 4
+            decimals (areas and seconds to 3).
+        """
         return {
             "format": "vrecho-reconstruction", "version": 1, "variant": self.variant,
             "labels": self.decisions[0].source if self.decisions else None,
@@ -69,14 +103,15 @@ def reconstruct(scan: Scan, *, hear: Callable | None = None, decide="echocnn", v
 
     Parameters
     ----------
-    scan : :class:`Scan`
-        The camera's frames and mesh (:func:`load_scan`, a capture, or the simulator's); not changed.
+    scan : :class:`~.scan.Scan`
+        The camera's frames and mesh (:func:`~.scan.load_scan`, a capture, or the simulator's);
+        not changed.
     hear : callable, optional
-        ``hear(views, frames) -> Echoes``: what the device hears at the given frame indices, for
-        a scan without recordings (the simulator's, or a live device's). Asked only for the frames
-        that face a hole, and only when the decider reads recordings.
+        ``hear(views, frames) -> Echoes``: what the device hears at the given frame indices (a
+        set of int), for a scan without recordings (the simulator's, or a live device's). Asked
+        only for the frames that face a hole, and only when the decider reads recordings.
     decide : str or decider
-        A name of :data:`~.decide.LABELS` (``"echocnn"``, vrecho's choice, or
+        A name of :data:`~.decide.LABELS` (``"echocnn"``, vrecho's choice and the default, or
         ``"echocnn-only"``), or a decider of one's own called as they are (the simulator's
         :class:`~vrecho.sim.scoring.Oracle`).
     variant : {"simplified", "per_vertex"}
@@ -88,6 +123,13 @@ def reconstruct(scan: Scan, *, hear: Callable | None = None, decide="echocnn", v
     -------
     Reconstruction
         Its ``scan`` holds the recordings the decision heard.
+
+    Raises
+    ------
+    VrechoError
+        For an unknown decider name or ``variant``; when the scan's mesh has fewer than 100
+        vertices; and when the decider reads recordings, the scan has none and no ``hear`` is
+        given.
     """
     if isinstance(decide, str):
         if decide not in LABELS:

@@ -15,7 +15,6 @@ from ..geometry import distance_to_polygon, point_in_polygon
 from .decide import Decision
 from .discontinuities import Hole, seen_through
 
-
 SURFACE_COLOURS = {"glass": (0.55, 0.75, 0.95), "mirror": (0.85, 0.85, 0.9), "wall": (0.6, 0.6, 0.6)}
 
 
@@ -24,8 +23,23 @@ VARIANTS = ("simplified", "per_vertex")
 
 @dataclass
 class Surface:
-    """A surface the repair added: its ``polygon`` (K, 3, world), ``material``, the hole it fills,
-    the decision's confidence and its ``triangles`` (F, 3) in the repaired mesh."""
+    """A surface the repair added.
+
+    Parameters
+    ----------
+    hole : int
+        Index of the hole it fills, in the holes given to :func:`repair`.
+    material : str
+        ``"glass"``, ``"mirror"`` or ``"wall"`` (a closed hole of no material given).
+    polygon : numpy.ndarray [shape=(K, 3)], float
+        Its outline, world coordinates in metres.
+    normal : numpy.ndarray [shape=(3,)], float
+        Unit normal of the hole's wall, into the room.
+    confidence : float
+        The decision's confidence.
+    triangles : numpy.ndarray [shape=(F, 3)], int
+        Its triangles, as indices into the repaired mesh's vertices.
+    """
 
     hole: int
     material: str
@@ -36,6 +50,7 @@ class Surface:
 
     @property
     def area_m2(self) -> float:
+        """The polygon's area in square metres."""
         p = self.polygon - self.polygon[0]
         return float(0.5 * np.linalg.norm(np.cross(p[1:-1], p[2:]).sum(axis=0)))
 
@@ -48,24 +63,43 @@ def repair(mesh, holes_: list[Hole], decisions: list[Decision], cameras: np.ndar
     ----------
     mesh : open3d.geometry.TriangleMesh
         The initial reconstruction (not modified).
-    holes_, decisions : lists of the same length
-        The holes found (:func:`holes`) and what each is (:func:`infer` or :func:`oracle`).
-    cameras : array, shape (N, 3)
-        Camera positions of the walkthrough (which phantom geometry was seen through a mirror).
+    holes_ : list of :class:`~.discontinuities.Hole`
+        The holes found (:func:`~.discontinuities.holes`).
+    decisions : list of :class:`~.decide.Decision`
+        What each hole is (:func:`~.decide.infer` or :func:`vrecho.sim.scoring.oracle`), one per
+        hole, in the same order.
+    cameras : numpy.ndarray [shape=(N, 3)], float
+        Camera positions of the walkthrough in metres (which phantom geometry was seen through
+        a mirror).
     variant : {"simplified", "per_vertex"}
-        ``simplified``: a new face, the convex hull of the hole's outline, at the decided plane.
-        ``per_vertex``: the mesh's own vertices around the hole (within ``rim_m`` of its
-        outline) on the convex hull are moved to the decided plane and the hull is filled from
-        them, so the patch is stitched to the scan.
+        ``simplified`` (the default): a new face, the convex hull of the hole's outline, at the
+        decided plane. ``per_vertex``: the mesh's own vertices around the hole (within 5 cm of
+        the wall's plane and ``rim_m`` of its outline, outside it) on the convex hull are moved
+        to the decided plane and the hull is filled from them, so the patch is stitched to the
+        scan; with fewer than three such vertices the hole is filled as ``simplified`` (and
+        ``actions`` records it).
     min_component_triangles : int
-        Connected pieces with fewer triangles are removed (loose fragments).
+        Connected pieces with fewer triangles are removed (loose fragments; default 200).
+    rim_m : float
+        Width of the rim around a hole's outline, in metres, whose vertices ``per_vertex``
+        takes (default 0.06).
 
     Returns
     -------
     repaired : open3d.geometry.TriangleMesh
+        The repaired mesh, with vertex normals; added surfaces are coloured by material
+        (:data:`SURFACE_COLOURS`), and a mesh without vertex colours gets grey ones.
     surfaces : list of :class:`Surface`
-    actions : list of dict, one per hole: what was done (filled, phantom triangles removed,
-        fragments removed).
+        One per closed hole, in the holes' order.
+    actions : list of dict
+        One per hole: what was done (``filled``; ``phantom_triangles_removed`` behind a mirror;
+        ``fragment_triangles_removed`` floating in an opening, within 0.1 m of its plane; and
+        for a filled hole ``fill``, the variant used, and ``fill_vertices``).
+
+    Raises
+    ------
+    VrechoError
+        For an unknown ``variant``, or when ``holes_`` and ``decisions`` differ in length.
     """
     import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 

@@ -21,8 +21,38 @@ from ..io import ensure_writable_dir, read_mesh
 
 @dataclass
 class Echoes:
-    """The device's recordings of its own probe: ``audio`` (K, n) 1 s frames at ``fs`` Hz from the
-    pulse onset, heard at the walkthrough frames ``frame`` (K,), and the ``emitted`` probe."""
+    """The device's recordings of its own probe, one per walkthrough frame that listened.
+
+    Parameters
+    ----------
+    frame : numpy.ndarray [shape=(K,)], int
+        The walkthrough frames (indices into the scan's views) the recordings were heard at;
+        flattened to (K,) int.
+    audio : numpy.ndarray [shape=(K, n)]
+        1 s frames at ``fs`` Hz from the pulse onset; stored as float32 (one 1-D recording is
+        taken as K = 1).
+    fs : int
+        Sample rate of ``audio`` and ``emitted``, in Hz.
+    emitted : numpy.ndarray [shape=(k,)]
+        The emitted probe, at ``fs``.
+
+    Raises
+    ------
+    VrechoError
+        When ``frame`` and ``audio`` hold different numbers of recordings.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from vrecho.reconstruct import Echoes
+    >>> e = Echoes([3, 7], np.zeros((2, 44100)), 44100, np.ones(4410))
+    >>> e.audio.dtype
+    dtype('float32')
+    >>> e.of(7).shape
+    (44100,)
+    >>> e.of(5) is None
+    True
+    """
 
     frame: np.ndarray
     audio: np.ndarray
@@ -36,14 +66,39 @@ class Echoes:
             raise VrechoError(f"echoes: {len(self.frame)} frame indices for {len(self.audio)} recordings")
 
     def of(self, frame: int) -> np.ndarray | None:
+        """The recording heard at a walkthrough frame.
+
+        Parameters
+        ----------
+        frame : int
+            Index of the frame in the scan's views.
+
+        Returns
+        -------
+        numpy.ndarray [shape=(n,)], float32, or None
+            The first recording heard at ``frame`` (at :attr:`fs` Hz), or None where the device
+            did not listen there.
+        """
         k = np.flatnonzero(self.frame == frame)
         return self.audio[k[0]] if len(k) else None
 
 
 @dataclass
 class Scan:
-    """A capture: the camera's frames (:class:`~vrecho.camera.View`), the mesh fused from them
-    (or the user's own) and, when the device listened, its :class:`Echoes`."""
+    """A capture: the camera's frames, the mesh fused from them (or the user's own) and, when the
+    device listened, its recordings.
+
+    Parameters
+    ----------
+    views : list of :class:`~vrecho.camera.View`
+        The camera's frames (grayscale, z-depth in metres, intrinsics, camera-to-world pose), in
+        walkthrough order.
+    mesh : open3d.geometry.TriangleMesh
+        The mesh fused from the frames (:func:`fuse`) or the user's own, in the same world frame
+        (z up, metres).
+    echoes : :class:`Echoes`, optional
+        What the device heard at some of the frames; None (the default) when it did not listen.
+    """
 
     views: list[View]
     mesh: object  # open3d.geometry.TriangleMesh
@@ -51,10 +106,30 @@ class Scan:
 
     @property
     def cameras(self) -> np.ndarray:
+        """Camera positions (N, 3) of the frames, world coordinates in metres."""
         return np.array([v.pose[:3, 3] for v in self.views])
 
     def save(self, folder: str | Path) -> Path:
-        """Write the scan in the documented folder format (see :func:`load_scan`)."""
+        """Write the scan in the documented folder format (see :func:`load_scan`).
+
+        ``frames.npz`` holds every frame's depth, gray and pose and the first frame's intrinsics;
+        ``mesh.ply`` the mesh; ``echoes.npz`` the recordings, when the scan has them.
+
+        Parameters
+        ----------
+        folder : str or pathlib.Path
+            The folder to write in; created if needed.
+
+        Returns
+        -------
+        pathlib.Path
+            The folder written.
+
+        Raises
+        ------
+        VrechoError
+            When the folder cannot be created or written in.
+        """
         import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 
         folder = ensure_writable_dir(Path(folder))
@@ -72,20 +147,33 @@ def fuse(views: list[View], *, voxel_m: float = 0.03, trunc_voxels: float = 4.0,
          progress: bool = False):
     """TSDF fusion of depth and grayscale frames into a coloured triangle mesh.
 
+    open3d's ``VoxelBlockGrid`` on the CPU, depth in metres read up to
+    :data:`~vrecho.camera.DEPTH_MAX_M` (10 m). Frames with no depth reading in range (clear
+    glass up close, the sky), and frames whose few readings touch no voxel block, are skipped.
+
     Parameters
     ----------
     views : list of :class:`vrecho.camera.View`
+        The frames: ``depth`` (H, W) z-depth in metres (0 where the sensor returned nothing),
+        ``gray`` (H, W) in [0, 1], intrinsics in pixels, camera-to-world poses.
     voxel_m : float
-        Voxel size in metres.
+        Voxel size in metres (default 0.03).
     trunc_voxels : float
-        Truncation distance in voxels.
+        Truncation distance in voxels (default 4).
     weight_threshold : float
-        Fewest observations for a surface to be kept.
+        Fewest observations for a surface to be kept (default 1).
+    progress : bool
+        Show a progress bar over the frames.
 
     Returns
     -------
     open3d.geometry.TriangleMesh
         Legacy mesh, world frame (Z up), vertex colours from the grayscale frames.
+
+    Raises
+    ------
+    VrechoError
+        When ``views`` is empty, or no frame has a depth reading in range.
     """
     import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
     import open3d.core as o3c  # heavy (1.2 s to import): only where meshes are made or ray-cast
@@ -122,7 +210,9 @@ def fuse(views: list[View], *, voxel_m: float = 0.03, trunc_voxels: float = 4.0,
 
 
 def load_scan(folder: str | Path, *, voxel_m: float = 0.03, progress: bool = False) -> Scan:
-    """A user's capture, from a folder:
+    """A user's capture, read from a scan folder.
+
+    The folder holds:
 
     ``frames.npz`` (required)
         ``depth`` (N, H, W) float, metres along the camera's axis, 0 where the sensor returned
@@ -135,6 +225,30 @@ def load_scan(folder: str | Path, *, voxel_m: float = 0.03, progress: bool = Fal
         ``frame`` (K,) frame indices, ``audio`` (K, n) 1 s recordings from the probe's onset
         (microphone 7 cm above the loudspeaker, both at the camera), ``fs`` (Hz), ``emitted``
         (the probe, 1-D at ``fs``). Without it only oracle labels can repair the scan.
+
+    Parameters
+    ----------
+    folder : str or pathlib.Path
+        The scan folder.
+    voxel_m : float
+        Voxel size in metres of the fusion (:func:`fuse`) when the folder has no ``mesh.ply``
+        (default 0.03).
+    progress : bool
+        Show a progress bar while fusing.
+
+    Returns
+    -------
+    Scan
+        The frames (gray as float32 in [0, 1], depth float32), the mesh and, where the folder
+        has ``echoes.npz``, the :class:`Echoes`.
+
+    Raises
+    ------
+    VrechoError
+        When ``frames.npz`` is missing, lacks one of its arrays, or holds arrays of the wrong
+        shapes; when depth is not finite and non-negative or a pose not finite; when
+        ``echoes.npz`` lacks an array or names frames outside the scan; when ``mesh.ply`` holds
+        no triangles; and when fusion finds no depth reading in range.
     """
     folder = Path(folder)
     path = folder / "frames.npz"

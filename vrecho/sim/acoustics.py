@@ -27,9 +27,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..device import DevicePose, MicArray
 from ..errors import VrechoError
 from ..io import atomic_save_npy
-from ..scene import BANDS_HZ, DevicePose, MicArray, Scene
+from ..materials import BANDS_HZ
+from ..scene import Scene
 from ..signals import FS, SPEED_OF_SOUND, check_fs, colored_noise
 
 __all__ = ["DEFAULT_SIMULATION", "MIC_SENSITIVITY", "SPEED_OF_SOUND", "Simulation", "build_room",
@@ -44,7 +46,25 @@ MIC_SENSITIVITY = 0.05
 
 @dataclass(frozen=True)
 class Simulation:
-    """Settings of the hybrid simulator (image sources up to ``max_order``, then ray tracing)."""
+    """Settings of the hybrid simulator (image sources up to ``max_order``, then ray tracing).
+
+    Parameters
+    ----------
+    max_order : int
+        Highest image-source reflection order (default 3).
+    n_rays : int
+        Rays traced for the diffuse tail (default 3000); 0 for image sources only.
+    receiver_radius_m : float
+        Radius of the ray tracer's receiving sphere in metres (default 0.5).
+    energy_thres : float
+        Energy below which a ray stops being traced (pyroomacoustics' ``energy_thres``,
+        default 1e-7).
+    length_s : float
+        Length of the impulse responses in seconds, and the ray tracer's time limit
+        (default 1.0: one pulse-train period).
+    air_absorption : bool
+        Whether air absorbs sound (default True).
+    """
 
     max_order: int = 3
     n_rays: int = 3000
@@ -58,6 +78,13 @@ DEFAULT_SIMULATION = Simulation()
 
 
 def default_cache_dir() -> Path:
+    """The folder of cached impulse responses: ``$VRECHO_CACHE/ir``, or ``~/.cache/vrecho/ir``.
+
+    Returns
+    -------
+    pathlib.Path
+        The folder (not created here).
+    """
     return Path(os.environ.get("VRECHO_CACHE", Path.home() / ".cache" / "vrecho")) / "ir"
 
 
@@ -68,8 +95,30 @@ def _octave_bands(fs: int):
 
 
 def build_room(scene: Scene, fs: int = FS, *, sim: Simulation = DEFAULT_SIMULATION):
-    """A ``pyroomacoustics.Room`` of the scene's patches, each with its own frequency-dependent
-    material (resampled to the simulator's bands so every wall has the same ones)."""
+    """A ``pyroomacoustics.Room`` of the scene's patches.
+
+    Each patch has its own frequency-dependent material (resampled to the simulator's bands so
+    every wall has the same ones). Ray tracing is set up only when ``sim.n_rays`` > 0.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene whose room, glass, mirrors and openings become walls.
+    fs : int
+        Sample rate in Hz (default :data:`vrecho.signals.FS`, 44 100).
+    sim : Simulation
+        Simulator settings.
+
+    Returns
+    -------
+    pyroomacoustics.Room
+        The room, with no source or microphone yet.
+
+    Raises
+    ------
+    VrechoError
+        If ``fs`` is not a whole number of hertz of at least 8000.
+    """
     import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
 
     fs = check_fs(fs)
@@ -139,29 +188,40 @@ def impulse_responses(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: in
                       facing: np.ndarray | None = None) -> np.ndarray:
     """Simulated impulse responses from one source to each microphone.
 
+    Simulated once per scene, source, microphones, sample rate, settings and facing, then read
+    back from the cache (a damaged entry is simulated again and replaced). The ray tracer's
+    random numbers are seeded from the cache key, so the same inputs give the same responses.
+
     Parameters
     ----------
     scene : Scene
-    source : array, shape (3,)
+        The scene whose room is simulated.
+    source : numpy.ndarray [shape=(3,)]
         Source position in metres.
-    mics : array, shape (M, 3)
-        Microphone positions in metres.
+    mics : numpy.ndarray [shape=(M, 3)]
+        Microphone positions in metres (a single (3,) position is taken as M = 1).
     fs : int
-        Sample rate in Hz.
+        Sample rate in Hz (default 44 100).
     sim : Simulation
         Simulator settings.
-    cache : path, bool or None
-        Folder of cached responses; None for :func:`default_cache_dir`, False for none.
-    facing : array, shape (3,), optional
+    cache : str, pathlib.Path, bool or None
+        Folder of cached responses; None or True for :func:`default_cache_dir`, False for none.
+    facing : numpy.ndarray [shape=(3,)], optional
         The device's forward axis when the source is its emitter: the emitter then radiates with
         the scene's ``emitter_p`` directivity (omnidirectional without it). Applies to the image
         sources; the diffuse ray-traced tail stays omnidirectional.
 
     Returns
     -------
-    numpy.ndarray, shape (M, round(sim.length_s * fs)), float32
+    numpy.ndarray [shape=(M, round(sim.length_s * fs))], float32
         Sample 0 is the emission instant; the tail beyond ``length_s`` is folded in modulo the
         length, as in the steady state of a pulse train with that period.
+
+    Raises
+    ------
+    VrechoError
+        If ``source`` or ``mics`` has the wrong shape, if the source or a microphone is outside
+        the room, or if ``fs`` is not a whole number of hertz of at least 8000.
     """
     import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
 
@@ -210,9 +270,24 @@ def impulse_responses(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: in
 
 
 def emitter_directivity(facing: np.ndarray, p: float):
-    """The device's loudspeaker as pyroomacoustics sees it: a cardioid-family pattern (``p``:
-    1 omnidirectional, 0.5 cardioid) pointing along ``facing``."""
-    from pyroomacoustics.directivities import CardioidFamily, DirectionVector  # heavy (1.4 s to import): only where it simulates or analyses
+    """The device's loudspeaker as pyroomacoustics sees it: a cardioid-family pattern.
+
+    Parameters
+    ----------
+    facing : numpy.ndarray [shape=(3,)]
+        Direction the loudspeaker points (any length; normalised here).
+    p : float
+        The pattern's parameter: 1 omnidirectional, 0.5 cardioid.
+
+    Returns
+    -------
+    pyroomacoustics.directivities.CardioidFamily
+        The pattern, pointing along ``facing``.
+    """
+    from pyroomacoustics.directivities import (  # heavy (1.4 s to import): only where it simulates or analyses
+        CardioidFamily,
+        DirectionVector,
+    )
 
     f = np.asarray(facing, float) / np.linalg.norm(facing)
     direction = DirectionVector(np.degrees(np.arctan2(f[1], f[0])), np.degrees(np.arccos(np.clip(f[2], -1, 1))))
@@ -221,22 +296,86 @@ def emitter_directivity(facing: np.ndarray, p: float):
 
 def device_impulse_response(scene: Scene, pose: DevicePose, *, array: MicArray | None = None, fs: int = FS,
                             sim: Simulation = DEFAULT_SIMULATION, cache=None) -> np.ndarray:
-    """Impulse responses (M, n) from the device's emitter to its microphones (the scene's array
-    by default; channel 0 is the protocol's microphone 7 cm above the emitter)."""
+    """Impulse responses from the device's emitter to its microphones.
+
+    The emitter radiates along ``pose.forward`` with the scene's directivity
+    (:func:`impulse_responses` with ``facing``).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene whose room is simulated.
+    pose : DevicePose
+        Where the device stands and faces.
+    array : MicArray, optional
+        The microphones (the scene's array by default; channel 0 is the protocol's microphone
+        7 cm above the emitter).
+    fs : int
+        Sample rate in Hz (default 44 100).
+    sim : Simulation
+        Simulator settings.
+    cache : str, pathlib.Path, bool or None
+        The response cache, as in :func:`impulse_responses`.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(M, n)], float32
+        One response per microphone, n = ``round(sim.length_s * fs)`` samples, sample 0 the
+        emission instant.
+
+    Raises
+    ------
+    VrechoError
+        As :func:`impulse_responses` (a microphone outside the room, a bad ``fs``).
+    """
     array = scene.mic_array if array is None else array
     return impulse_responses(scene, pose.emitter, pose.microphones(array), fs, sim=sim, cache=cache, facing=pose.forward)
 
 
 def direct_amplitude(distance_m: float, gain: float = 1.0) -> float:
-    """Amplitude of the direct path at ``distance_m`` for a unit source radiating with ``gain``
-    toward the microphone: gain / r, the convention of pyroomacoustics 0.10 (checked: 14.2 at
-    7 cm, not 1 / 4 pi r)."""
+    """Amplitude of the direct path at ``distance_m`` for a unit source.
+
+    gain / r, the convention of pyroomacoustics 0.10 (checked: 14.2 at 7 cm, not 1 / 4 pi r);
+    distances under 1 mm count as 1 mm.
+
+    Parameters
+    ----------
+    distance_m : float
+        Distance from the source to the microphone in metres.
+    gain : float
+        The source's directivity gain toward the microphone (default 1, omnidirectional).
+
+    Returns
+    -------
+    float
+        The direct sound's amplitude in the impulse response.
+
+    Examples
+    --------
+    >>> round(direct_amplitude(0.07), 1)
+    14.3
+    """
     return gain / max(distance_m, 1e-3)
 
 
 def device_direct_amplitude(scene: Scene, pose: DevicePose) -> float:
-    """Amplitude of the device's own direct sound at its microphone (the loudspeaker's
-    directivity toward the microphone, 7 cm above it, included)."""
+    """Amplitude of the device's own direct sound at its microphone.
+
+    The loudspeaker's directivity (the scene's ``emitter_p``) toward the microphone, 7 cm above
+    it, is included.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene, for the loudspeaker's directivity.
+    pose : DevicePose
+        The device's pose.
+
+    Returns
+    -------
+    float
+        :func:`direct_amplitude` of the microphone's distance, with that gain.
+    """
     offset = pose.microphone - pose.emitter
     r = float(np.linalg.norm(offset))
     cos = float(np.dot(pose.forward, offset)) / r
@@ -244,16 +383,53 @@ def device_direct_amplitude(scene: Scene, pose: DevicePose) -> float:
 
 
 def recording_conditions(rng: np.random.Generator) -> tuple[float, float, float]:
-    """One recording's background noise and microphone self-noise (dB below the direct sound)
-    and recording gain (dB), drawn within PROTOCOL.md's ranges."""
+    """One recording's noise levels and gain, drawn within PROTOCOL.md's ranges.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of the draw.
+
+    Returns
+    -------
+    snr_db : float
+        Pink background noise, 20 to 40 dB below the direct sound.
+    self_noise_db : float
+        White microphone self-noise, 55 to 70 dB below the direct sound.
+    gain_db : float
+        Recording gain, -6 to 0 dB.
+    """
     return rng.uniform(20, 40), rng.uniform(55, 70), rng.uniform(-6, 0)
 
 
 def through_microphone(x: np.ndarray, sound: np.ndarray, direct_amp: float, rng: np.random.Generator, snr_db: float,
                 self_noise_db: float, gain_db: float) -> np.ndarray:
-    """What the microphone adds to the sound field ``x``: pink background noise and white
-    self-noise, ``snr_db`` and ``self_noise_db`` below the direct sound, then its sensitivity and
-    the recording gain."""
+    """What the microphone adds to the sound field ``x``.
+
+    Pink background noise and white self-noise, ``snr_db`` and ``self_noise_db`` below the
+    direct sound (``direct_amp`` times the RMS of ``sound``), then its sensitivity
+    (:data:`MIC_SENSITIVITY`) and the recording gain.
+
+    Parameters
+    ----------
+    x : numpy.ndarray [shape=(..., n)]
+        The sound field at the microphones; every channel gets its own noise.
+    sound : numpy.ndarray [shape=(k,)]
+        The emitted sound, for the direct sound's level.
+    direct_amp : float
+        Amplitude of the direct path.
+    rng : numpy.random.Generator
+        Source of the noise.
+    snr_db, self_noise_db : float
+        Pink background noise and white self-noise, in dB below the direct sound.
+    gain_db : float
+        Recording gain in dB.
+
+    Returns
+    -------
+    numpy.ndarray [shape=x.shape], float32
+        The recording.
+    """
     level = direct_amp * np.sqrt(np.mean(np.asarray(sound, dtype=np.float64) ** 2))
     n = x.shape[-1]
     pink = np.stack([colored_noise(n, 1.0, rng) for _ in range(int(np.prod(x.shape[:-1])))]).reshape(x.shape)
@@ -266,24 +442,44 @@ def record_pulse(ir: np.ndarray, sound: np.ndarray, direct_amp: float, rng: np.r
                  snr_db: float = 30.0, self_noise_db: float = 60.0, gain_db: float = 0.0) -> np.ndarray:
     """One 1 s frame of the device hearing its own pulse train.
 
+    The frame is one period of ``ir`` long (1 s with the default :class:`Simulation`).
+
     Parameters
     ----------
-    ir : array, shape (n,) or (M, n)
+    ir : numpy.ndarray [shape=(n,) or (M, n)]
         Impulse responses from :func:`impulse_responses` (n samples = one period).
-    sound : array, shape (k,)
+    sound : numpy.ndarray [shape=(k,)]
         The emitted sound (k <= n).
     direct_amp : float
         Amplitude of the direct path (:func:`device_direct_amplitude`): the noise levels are
         relative to the direct sound.
+    rng : numpy.random.Generator
+        Source of the noise.
     snr_db, self_noise_db : float
-        Pink background noise and white self-noise, in dB below the direct sound.
+        Pink background noise and white self-noise, in dB below the direct sound (defaults 30
+        and 60 dB).
     gain_db : float
-        Recording gain.
+        Recording gain in dB (default 0).
 
     Returns
     -------
-    numpy.ndarray, same shape as ``ir``, float32
+    numpy.ndarray [shape=ir.shape], float32
         Steady state of the pulse train: circular convolution of the folded response with the sound.
+
+    Raises
+    ------
+    VrechoError
+        If ``sound`` is not 1-D or is longer than the frame.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from vrecho.signals import probe
+    >>> ir = np.zeros(44100)
+    >>> ir[0] = 14.3  # the direct sound alone
+    >>> frame = record_pulse(ir, probe(), 14.3, np.random.default_rng(0))
+    >>> frame.shape, frame.dtype
+    ((44100,), dtype('float32'))
     """
     ir = np.asarray(ir, dtype=np.float64)
     n = ir.shape[-1]
@@ -297,9 +493,43 @@ def record_pulse(ir: np.ndarray, sound: np.ndarray, direct_amp: float, rng: np.r
 def record_source(ir: np.ndarray, sound: np.ndarray, onset_s: float, direct_amp: float,
                   rng: np.random.Generator, fs: int = FS, snr_db: float = 30.0, self_noise_db: float = 60.0,
                   gain_db: float = 0.0) -> np.ndarray:
-    """1 s of microphone signal while an ambient source plays ``sound`` once, starting ``onset_s``
-    into the frame (linear convolution: the source is not periodic). ``direct_amp``: as in
-    :func:`record_pulse` (:func:`direct_amplitude` of the source's distance)."""
+    """1 s of microphone signal while an ambient source plays ``sound`` once.
+
+    The sound starts ``onset_s`` into the frame (linear convolution: the source is not periodic);
+    what would sound past the frame's end is cut. The frame is one period of ``ir`` long (1 s
+    with the default :class:`Simulation`).
+
+    Parameters
+    ----------
+    ir : numpy.ndarray [shape=(n,) or (M, n)]
+        Impulse responses from the source to the microphones (:func:`impulse_responses`).
+    sound : numpy.ndarray [shape=(k,)]
+        What the source plays.
+    onset_s : float
+        When it starts, in seconds from the frame's start.
+    direct_amp : float
+        As in :func:`record_pulse` (:func:`direct_amplitude` of the source's distance).
+    rng : numpy.random.Generator
+        Source of the noise.
+    fs : int
+        Sample rate in Hz (default 44 100).
+    snr_db, self_noise_db : float
+        Pink background noise and white self-noise, in dB below the direct sound (defaults 30
+        and 60 dB).
+    gain_db : float
+        Recording gain in dB (default 0).
+
+    Returns
+    -------
+    numpy.ndarray [shape=ir.shape], float32
+        The recording.
+
+    Raises
+    ------
+    VrechoError
+        If ``onset_s`` lies outside the frame, or ``fs`` is not a whole number of hertz of at
+        least 8000.
+    """
     ir = np.asarray(ir, dtype=np.float64)
     n = ir.shape[-1]
     start = int(round(onset_s * check_fs(fs)))
@@ -314,8 +544,25 @@ def record_source(ir: np.ndarray, sound: np.ndarray, onset_s: float, direct_amp:
 
 
 def echo_delay_s(scene: Scene, pose: DevicePose, index: int | None = None) -> float:
-    """Time from the direct sound to the specular echo off a discontinuity's plane, in seconds
-    (the image-source path through the plane minus the direct path)."""
+    """Time from the direct sound to the specular echo off a discontinuity's plane.
+
+    The image-source path through the plane minus the direct path, at
+    :data:`~vrecho.signals.SPEED_OF_SOUND`.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    pose : DevicePose
+        The device's pose.
+    index : int, optional
+        The discontinuity (the pose's target by default).
+
+    Returns
+    -------
+    float
+        The delay in seconds.
+    """
     index = pose.target if index is None else index
     _, _, normal = scene.room.wall_frame(scene.discontinuities[index].wall)
     depth = scene.depth_m(pose, index)

@@ -20,8 +20,9 @@ import numpy as np
 
 from localization.capture import FS, Capture
 
+from ..device import MIC_ABOVE_EMITTER_M, MIC_ARRAYS, DevicePose, MicArray
 from ..errors import VrechoError
-from ..scene import MIC_ABOVE_EMITTER_M, MIC_ARRAYS, DevicePose, MicArray, Scene
+from ..scene import Scene
 from ..signals import check_fs, colored_noise
 from .acoustics import Simulation, impulse_responses
 from .scenes import walkthrough_path
@@ -30,20 +31,51 @@ from .sounds import ambient_sound
 
 @dataclass(frozen=True)
 class Shoebox:
-    """A rectangular room ``dims`` (x, y, z metres, corner at the origin) whose walls share one
-    frequency-flat absorption chosen for reverberation time ``rt60_s`` (Sabine)."""
+    """A rectangular room whose walls share one frequency-flat absorption.
+
+    The absorption is chosen for the reverberation time ``rt60_s`` (Sabine).
+
+    Parameters
+    ----------
+    dims : tuple of float
+        The room's size (x, y, z) in metres, corner at the origin.
+    rt60_s : float
+        Reverberation time in seconds.
+    """
 
     dims: tuple[float, float, float]
     rt60_s: float
 
     def contains(self, p: np.ndarray) -> np.ndarray:
+        """Whether points lie strictly inside the room.
+
+        Parameters
+        ----------
+        p : numpy.ndarray [shape=(N, 3) or (3,)]
+            Points in metres.
+
+        Returns
+        -------
+        numpy.ndarray [shape=(N,)], bool
+            True for each point inside.
+        """
         p = np.atleast_2d(p)
         return np.all((p > 0) & (p < np.asarray(self.dims)), axis=1)
 
 
 @dataclass
 class AmbientSource:
-    """A source at ``position`` playing ``signal`` (1-D, at the capture's rate) from time 0."""
+    """A source at ``position`` playing ``signal`` from time 0.
+
+    Parameters
+    ----------
+    position : numpy.ndarray [shape=(3,)]
+        Where the source is, in metres.
+    signal : numpy.ndarray [shape=(n,)]
+        What it plays (1-D, at the capture's rate).
+    name : str
+        A label (default "source").
+    """
 
     position: np.ndarray
     signal: np.ndarray
@@ -52,8 +84,19 @@ class AmbientSource:
 
 @dataclass
 class SimulatedCapture:
-    """``captures`` (one per pose), ``images`` (poses, sources, mics, samples): what each source
-    alone contributes to each microphone (the separation reference), ``sources`` and ``poses``."""
+    """A simulated capture along a walk, with the separation reference.
+
+    Parameters
+    ----------
+    captures : list of localization.capture.Capture
+        One per pose: (mics, samples) audio with the microphones' world positions.
+    images : numpy.ndarray [shape=(poses, sources, mics, samples)], float64
+        What each source alone contributes to each microphone (the separation reference).
+    sources : list of AmbientSource
+        The sources heard.
+    poses : list of DevicePose
+        The device's poses, one per capture.
+    """
 
     captures: list[Capture]
     images: np.ndarray
@@ -93,9 +136,46 @@ def simulate_walk_capture(room: Scene | Shoebox, sources: list[AmbientSource], p
                           cache=None) -> SimulatedCapture:
     """Record ``sources`` at each of ``poses`` (see the module's docstring).
 
-    ``snr_db``: the sources' summed power at the reference microphone over pink background noise;
-    ``self_noise_db``: the same over white self-noise on every channel. ``cache``: the impulse
-    response cache of :func:`vrecho.sim.acoustics.impulse_responses` (Scene rooms only).
+    Capture ``k`` hears each source's signal from ``k * segment_s``, with the room's
+    reverberation of what came before.
+
+    Parameters
+    ----------
+    room : Scene or Shoebox
+        The room: a scene's (image sources plus ray tracing) or a shoebox (image sources).
+    sources : list of AmbientSource
+        The sources; each signal must last at least ``len(poses) * segment_s`` seconds.
+    poses : list of DevicePose
+        Where the device is for each capture.
+    rng : numpy.random.Generator
+        Source of the noise.
+    array : MicArray or str
+        The microphones, or the name of one of :data:`vrecho.scene.MIC_ARRAYS` (default
+        "headset4").
+    fs : int
+        Sample rate in Hz (default :data:`localization.capture.FS`, 16 000).
+    segment_s : float
+        Length of each capture in seconds (default 2).
+    snr_db : float
+        The sources' summed power at the reference microphone over pink background noise, in dB
+        (default 30).
+    self_noise_db : float
+        The same over white self-noise on every channel, in dB (default 60).
+    cache : str, pathlib.Path, bool or None
+        The impulse response cache of :func:`vrecho.sim.acoustics.impulse_responses` (Scene
+        rooms only).
+
+    Returns
+    -------
+    SimulatedCapture
+        One capture of ``round(segment_s * fs)`` samples per pose, starting at ``k * segment_s``
+        seconds, and each source's image at every microphone.
+
+    Raises
+    ------
+    VrechoError
+        If there is no source, a signal is not 1-D or too short, a source or a microphone is
+        outside the room, or ``fs`` is not a whole number of hertz of at least 8000.
     """
     fs = check_fs(fs)
     array = MIC_ARRAYS[array] if isinstance(array, str) else array
@@ -135,10 +215,41 @@ def simulate_walk_capture(room: Scene | Shoebox, sources: list[AmbientSource], p
 
 def hear_scene(scene: Scene, rng: np.random.Generator, *, n_poses: int = 8, segment_s: float = 1.5,
                array: MicArray | str = "headset4", fs: int = FS, cache=None) -> SimulatedCapture:
-    """The scene's own sources heard along its walkthrough (its ``camera_path``, or
-    :func:`vrecho.sim.scenes.walkthrough_path`): ``n_poses`` captures of ``segment_s`` each, the
-    headset looking where the camera looks; each source plays its sound repeated at random
-    intervals (:func:`vrecho.sim.sounds.ambient_sound`) at its gain."""
+    """The scene's own sources heard along its walkthrough.
+
+    The walkthrough is the scene's ``camera_path``, or :func:`vrecho.sim.scenes.walkthrough_path`:
+    ``n_poses`` captures of ``segment_s`` each, the headset looking where the camera looks (its
+    emitter 7 cm below the path); each source plays its sound repeated at random intervals
+    (:func:`vrecho.sim.sounds.ambient_sound`) at its gain.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene, with at least one sound source.
+    rng : numpy.random.Generator
+        Source of the sounds and the noise.
+    n_poses : int
+        Number of captures, evenly spaced along the path (default 8).
+    segment_s : float
+        Length of each capture in seconds (default 1.5).
+    array : MicArray or str
+        The microphones, or the name of one of :data:`vrecho.scene.MIC_ARRAYS` (default
+        "headset4").
+    fs : int
+        Sample rate in Hz (default 16 000).
+    cache : str, pathlib.Path, bool or None
+        The impulse response cache of :func:`vrecho.sim.acoustics.impulse_responses`.
+
+    Returns
+    -------
+    SimulatedCapture
+        As :func:`simulate_walk_capture`.
+
+    Raises
+    ------
+    VrechoError
+        If the scene has no sound sources, or as :func:`simulate_walk_capture`.
+    """
     if not scene.sources:
         raise VrechoError(f"scene {scene.name!r} has no sound sources to hear")
     path = scene.camera_path or walkthrough_path(scene)
@@ -159,12 +270,46 @@ PROTOCOL_SOUNDS = ("clap", "voice", "whistle", "chirp", "white_noise", "pink_noi
 
 def random_walk(rng: np.random.Generator, n_sources: int, rt60_s: float, *, n_poses: int = 8,
                 segment_s: float = 1.5) -> tuple[Shoebox, list[AmbientSource], list[DevicePose]]:
-    """A random shoebox room 3.5-7 x 3-6 x 2.4-3 m of reverberation time ``rt60_s``, a walk of
-    ``n_poses`` headset poses along an arc through it (head turned up to 46 degrees from the
-    path, 1.45 to 1.7 m high) and ``n_sources`` sources at least 1 m apart and 1 m from the walk,
-    each playing speech, music, appliance hum or one of PROTOCOL.md's sounds repeated, long
-    enough for ``n_poses`` captures of ``segment_s``: the benchmark's rooms and the mask
-    network's training rooms (different seeds)."""
+    """A random shoebox room, a walk through it and sources around it.
+
+    A room 3.5-7 x 3-6 x 2.4-3 m of reverberation time ``rt60_s``, a walk of ``n_poses`` headset
+    poses along an arc through it (head turned up to 46 degrees from the path, 1.45 to 1.7 m
+    high) and ``n_sources`` sources at least 1 m apart and 1 m from the walk, each playing
+    speech, music, appliance hum or one of PROTOCOL.md's sounds repeated, long enough for
+    ``n_poses`` captures of ``segment_s``: the benchmark's rooms and the mask network's training
+    rooms (different seeds). The signals are at 16 kHz (:data:`localization.capture.FS`).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of the draw.
+    n_sources : int
+        Number of sources.
+    rt60_s : float
+        Reverberation time in seconds.
+    n_poses : int
+        Number of poses along the walk (default 8).
+    segment_s : float
+        Length of each capture in seconds (default 1.5).
+
+    Returns
+    -------
+    room : Shoebox
+        The room.
+    sources : list of AmbientSource
+        The sources, each signal ``n_poses * segment_s`` seconds long.
+    poses : list of DevicePose
+        The walk.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> room, sources, poses = random_walk(np.random.default_rng(0), 2, 0.5)
+    >>> room.rt60_s, len(sources), len(poses)
+    (0.5, 2, 8)
+    >>> sources[0].signal.shape
+    (192000,)
+    """
     dims = (rng.uniform(3.5, 7), rng.uniform(3, 6), rng.uniform(2.4, 3.0))
     c = np.array(dims[:2]) / 2
     rx, ry = c[0] - rng.uniform(0.9, 1.3), c[1] - rng.uniform(0.9, 1.3)

@@ -27,18 +27,67 @@ def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, 
                        snr_db: float = 30.0, drift: float = 0.0, clip: float | None = None,
                        dropped: tuple[int, ...] = (), lead_s: float = 0.3,
                        pauses: dict[int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """A recording of the pulse train as a phone makes it, with the truth: the microphone's
-    signal (float32) and where each pulse's direct sound begins (fractional samples; NaN for a
-    dropped pulse).
+    """A recording of the pulse train as a phone makes it, with the truth.
 
-    ``ir``: the room's impulse response from the loudspeaker to the microphone (sample 0: the
-    emission; :func:`~vrecho.sim.acoustics.device_impulse_response`), whose first arrival is the
-    direct sound; or one per pulse (n_pulses, n), the device moving; pulses every ``PERIOD_S * (1 + drift)`` s from ``lead_s`` plus a random
-    fraction of a sample (the two clocks are not aligned), pulses in ``dropped`` not played,
-    the train held back by ``pauses[k]`` seconds from pulse k on (the player paused, or looping
-    its file with a gap at the seam);
-    pink noise ``snr_db`` below the direct sound, clipped at ``clip`` times the direct sound's
-    peak (if given).
+    Pulses come every ``PERIOD_S * (1 + drift)`` s from ``lead_s`` plus a random fraction of a
+    sample (the two clocks are not aligned), pulses in ``dropped`` are not played, and the train
+    is held back by ``pauses[k]`` seconds from pulse k on (the player paused, or looping its file
+    with a gap at the seam). Pink noise ``snr_db`` below the direct sound and white self-noise
+    80 dB below it are added, and the microphone's sensitivity applied
+    (:func:`~vrecho.sim.acoustics.through_microphone`); then the signal is clipped at ``clip``
+    times the direct sound's peak (if given). That peak is taken before the microphone's
+    sensitivity (0.05), so the rail lies at 20 x ``clip`` times the direct sound's peak as
+    recorded (``clip`` = 0.3 puts it at 6 times that peak).
+
+    Parameters
+    ----------
+    ir : numpy.ndarray [shape=(n,) or (n_pulses, n)]
+        The room's impulse response from the loudspeaker to the microphone (sample 0: the
+        emission; :func:`~vrecho.sim.acoustics.device_impulse_response`), whose first arrival is
+        the direct sound; or one per pulse, the device moving.
+    n_pulses : int
+        Number of pulses in the train.
+    rng : numpy.random.Generator
+        Source of the sub-sample offset and the noise.
+    fs : int
+        Sample rate in Hz (default 44 100).
+    emitted : numpy.ndarray [shape=(k,)], optional
+        The emitted sound (vrecho's probe at ``fs`` by default).
+    snr_db : float
+        Pink noise level in dB below the direct sound (default 30).
+    drift : float
+        Relative error of the player's clock: the period is ``PERIOD_S * (1 + drift)`` s
+        (default 0).
+    clip : float, optional
+        Where the signal clips, in times the direct sound's peak (see above); None for no
+        clipping.
+    dropped : tuple of int
+        Indices of pulses not played.
+    lead_s : float
+        Time before the first pulse in seconds (default 0.3).
+    pauses : dict of int to float, optional
+        Delay in seconds added from pulse k on, keyed by k.
+
+    Returns
+    -------
+    audio : numpy.ndarray [shape=(N,)], float32
+        The microphone's signal.
+    onsets : numpy.ndarray [shape=(n_pulses,)], float64
+        Where each pulse's direct sound begins, in fractional samples; NaN for a dropped pulse.
+
+    Raises
+    ------
+    VrechoError
+        If ``ir`` is 2-D with other than ``n_pulses`` rows.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ir = np.zeros(4410)
+    >>> ir[0], ir[900] = 14.3, 0.5  # the direct sound and one echo
+    >>> audio, onsets = simulate_recording(ir, 3, np.random.default_rng(0), dropped=(1,))
+    >>> audio.shape, onsets.shape, bool(np.isnan(onsets[1]))
+    ((171990,), (3,), True)
     """
     s = probe(fs) if emitted is None else np.asarray(emitted, dtype=np.float64)
     irs = np.asarray(ir, dtype=np.float64)
@@ -79,16 +128,52 @@ def simulate_recording(ir: np.ndarray, n_pulses: int, rng: np.random.Generator, 
 def simulate_capture(scene, folder, *, n_pulses: int = 20, fps: float = 4.0, camera=None, seed: int = 0,
                      audio_codec: str = "flac", snr_db: float = 30.0, video: tuple[int, int, float] | None = None,
                      progress: bool = False) -> dict:
-    """A phone capture of a scene as a user brings it to ``vrecho capture``, made by the simulator:
-    the device walks the scene's path (:func:`~vrecho.sim.scenes.walkthrough_path` if it has none)
-    for ``n_pulses`` seconds playing the pulse train; ``capture.mkv`` (H.264 pictures at ``fps``
-    and the microphone's sound; ``audio_codec`` "flac", or "aac" in ``capture.mp4``), the
-    pictures' poses as COLMAP's text model in ``poses/`` (numbered from 1 at ``fps``, as ffmpeg
-    extracts them), and the depth camera's scan fused into ``mesh.ply``. Each pulse is heard
-    through the room's response where the device is when it plays. ``video`` (width, height,
-    rate): the video as a phone writes it instead, each rendered picture scaled up and shown
-    until the next, with a little sensor noise. Returns the paths, and the true onsets (s) and
-    device poses of the pulses."""
+    """A phone capture of a scene as a user brings it to ``vrecho capture``, made by the simulator.
+
+    The device walks the scene's path (:func:`~vrecho.sim.scenes.walkthrough_path` if it has
+    none) for ``n_pulses`` seconds playing the pulse train; ``capture.mkv`` (H.264 pictures at
+    ``fps`` and the microphone's sound, scaled to peak 0.5; ``audio_codec`` "flac", or "aac" in
+    ``capture.mp4``), the pictures' poses as COLMAP's text model in ``poses/`` (numbered from 1
+    at ``fps``, as ffmpeg extracts them), and the depth camera's scan fused into ``mesh.ply``.
+    Each pulse is heard through the room's response where the device is when it plays.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene to capture.
+    folder : str or pathlib.Path
+        Where the files go (created if needed).
+    n_pulses : int
+        Number of pulses, one a second (default 20).
+    fps : float
+        Rate of the rendered pictures in frames per second (default 4).
+    camera : vrecho.camera.Camera, optional
+        The phone's camera (``Camera()`` by default).
+    seed : int
+        Seed of the recording's noise and the video's sensor noise (default 0).
+    audio_codec : str
+        "flac" (in ``capture.mkv``, the default) or "aac" (in ``capture.mp4``).
+    snr_db : float
+        Pink noise level in dB below the direct sound (default 30).
+    video : tuple of (int, int, float), optional
+        (width, height, rate): the video as a phone writes it instead, each rendered picture
+        scaled up to width x height pixels and shown until the next at ``rate`` frames per
+        second, with a little sensor noise.
+    progress : bool
+        Whether to show progress bars.
+
+    Returns
+    -------
+    dict
+        "video", "poses" and "mesh": the paths; "fps"; "onsets_s": the true onsets of the
+        pulses (n_pulses,) in seconds; "pulse_poses": the device's camera-to-world poses at the
+        pulses (n_pulses, 4, 4).
+
+    Raises
+    ------
+    VrechoError
+        If ``folder`` cannot be written.
+    """
     import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 
     camera = Camera() if camera is None else camera

@@ -19,13 +19,36 @@ from ..signals import FS, emitted_sound, probe
 from .acoustics import device_direct_amplitude, device_impulse_response, echo_delay_s, record_pulse
 from .render import World, crop
 
-
 ECHO_WINDOW_S = 0.3e-3
 
 
 @dataclass
 class Observation:
-    """One device pose: the truth about the surface it faces and what its microphone heard."""
+    """One device pose: the truth about the surface it faces and what its microphone heard.
+
+    Attributes
+    ----------
+    pose : int
+        Index of the pose in the scene's ``poses``.
+    surface : int
+        Index of the discontinuity it faces.
+    kind : str
+        That discontinuity's kind (open, glass or mirror).
+    depth_m : float
+        The device's distance from the surface in metres.
+    incidence_deg : float
+        Angle between the device's axis and the surface's normal in degrees.
+    echo_delay_ms : float
+        Expected echo delay after the direct sound, from geometry, in milliseconds.
+    echo_level_db : float
+        Measured echo peak at that delay (within 0.3 ms) relative to the direct sound, in dB.
+    frame : numpy.ndarray [shape=(44100,)], float32
+        The probe's 1 s frame.
+    response : numpy.ndarray [shape=(1323,)], float32
+        Impulse response estimated from it (first 30 ms).
+    ir : numpy.ndarray [shape=(44100,)], float32
+        The simulated impulse response behind the frame.
+    """
 
     pose: int
     surface: int
@@ -40,7 +63,22 @@ class Observation:
 
 
 def listen(scene: Scene, rng: np.random.Generator | None = None, *, progress: bool = True) -> list[Observation]:
-    """Simulate the probe at every pose of ``scene`` that faces a discontinuity."""
+    """Simulate the probe at every pose of ``scene`` that faces a discontinuity.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene; poses without a target are skipped.
+    rng : numpy.random.Generator, optional
+        Source of the recordings' noise (``default_rng(0)`` by default).
+    progress : bool
+        Whether to show a progress bar (default True).
+
+    Returns
+    -------
+    list of Observation
+        One per pose that faces a discontinuity, in the scene's order (30 dB background noise).
+    """
     rng = np.random.default_rng(0) if rng is None else rng
     sound = probe()
     out = []
@@ -61,8 +99,21 @@ def listen(scene: Scene, rng: np.random.Generator | None = None, *, progress: bo
 
 
 def table(observations: list[Observation], predictions=None) -> str:
-    """The observations as a Markdown table, with EchoCNN's answers beside the truth when given
-    (one :class:`vrecho.classifier.Prediction` per observation)."""
+    """The observations as a Markdown table, with EchoCNN's answers beside the truth when given.
+
+    Parameters
+    ----------
+    observations : list of Observation
+        From :func:`listen`.
+    predictions : list of vrecho.classifier.Prediction, optional
+        One per observation: its open or closed answer (with the material), confidence and depth
+        in metres.
+
+    Returns
+    -------
+    str
+        The table, one row per observation.
+    """
     head = "| pose | surface | kind | depth (m) | incidence (deg) | echo delay (ms) | echo level (dB re direct) |"
     rule = "|---:|---:|:---|---:|---:|---:|---:|"
     if predictions is not None:
@@ -82,7 +133,24 @@ def table(observations: list[Observation], predictions=None) -> str:
 
 def figure(scene: Scene, observations: list[Observation], path: Path) -> Path:
     """Per surface: the clap's log-mel spectrogram, the probe's echo response with the expected
-    echo marked, and the camera's crop."""
+    echo marked, and the camera's crop.
+
+    Each surface is shown from its pose nearest 1.5 m, one column per surface.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene the observations come from.
+    observations : list of Observation
+        From :func:`listen`.
+    path : pathlib.Path
+        The image file to write (its format from its suffix).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
     import matplotlib  # heavy (0.8 s to import): only figures need it
 
     matplotlib.use("Agg")

@@ -17,10 +17,10 @@ import zlib
 import numpy as np
 
 from ..camera import CROP_SHAPE, DEPTH_MAX_M, Camera, View, crop_grid
+from ..device import DevicePose
 from ..errors import VrechoError
 from ..geometry import triangulate_polygon
-from ..scene import DevicePose, Scene
-
+from ..scene import Scene
 
 GLASS_TRANSMIT = 0.85
 
@@ -38,7 +38,22 @@ _DIFFUSE, _GLASS, _MIRROR = 0, 1, 2
 
 
 class World:
-    """The scene as open3d ray-casting geometry, with what each piece looks like."""
+    """The scene as open3d ray-casting geometry, with what each piece looks like.
+
+    The room's patches (openings left out, so rays pass through them) and an exterior drawn
+    from the scene's name: ground, and 8 to 13 boxes (buildings, trees) at least 1 m outside the
+    room.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene to draw.
+
+    Attributes
+    ----------
+    scene : Scene
+        The scene drawn.
+    """
 
     def __init__(self, scene: Scene):
         import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
@@ -98,7 +113,24 @@ class World:
             self._add(np.array(f, float), _DIFFUSE, float(albedo), True, pattern)
 
     def cast(self, origins: np.ndarray, dirs: np.ndarray):
-        """Distance, geometry id (-1 on a miss) and unit normal of the first hit of each ray."""
+        """Distance, geometry id (-1 on a miss) and unit normal of the first hit of each ray.
+
+        Parameters
+        ----------
+        origins : numpy.ndarray [shape=(N, 3)]
+            Ray origins in metres.
+        dirs : numpy.ndarray [shape=(N, 3)]
+            Unit ray directions.
+
+        Returns
+        -------
+        t : numpy.ndarray [shape=(N,)], float64
+            Distance to the hit in metres, infinite on a miss.
+        gid : numpy.ndarray [shape=(N,)], int64
+            Geometry id of the hit piece, -1 on a miss.
+        normals : numpy.ndarray [shape=(N, 3)], float64
+            Unit normal of the hit triangle.
+        """
         import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 
         rays = o3d.core.Tensor(np.hstack([origins, dirs]).astype(np.float32))
@@ -109,7 +141,25 @@ class World:
         return t, gid, ans["primitive_normals"].numpy().astype(np.float64)
 
     def shade(self, points: np.ndarray, normals: np.ndarray, gid: np.ndarray) -> np.ndarray:
-        """Radiance of diffuse hits: albedo times a procedural texture times Lambert lighting."""
+        """Radiance of diffuse hits: albedo times a procedural texture times Lambert lighting.
+
+        The room's pieces are lit by a light 10 cm below the ceiling above the footprint's
+        centre, the exterior by the sun.
+
+        Parameters
+        ----------
+        points : numpy.ndarray [shape=(N, 3)]
+            Hit points in metres.
+        normals : numpy.ndarray [shape=(N, 3)]
+            Unit normals there.
+        gid : numpy.ndarray [shape=(N,)], int
+            Geometry ids of the hit pieces (no misses).
+
+        Returns
+        -------
+        numpy.ndarray [shape=(N,)], float64
+            Grayscale radiance, 0 to 1.
+        """
         albedo = np.asarray(self._albedo)[gid]
         pattern = np.asarray(self._pattern)[gid]
         x, y, z = points.T
@@ -131,7 +181,23 @@ class World:
         return albedo * tex * (0.35 + 0.65 * lambert)
 
     def trace(self, origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-        """Grayscale radiance (N,) along rays, through glass and off mirrors up to 3 bounces."""
+        """Grayscale radiance (N,) along rays, through glass and off mirrors up to 3 bounces.
+
+        A ray that misses everything sees the sky; one still on glass or a mirror after the last
+        bounce looks like a dim wall.
+
+        Parameters
+        ----------
+        origins : numpy.ndarray [shape=(N, 3)]
+            Ray origins in metres.
+        dirs : numpy.ndarray [shape=(N, 3)]
+            Unit ray directions.
+
+        Returns
+        -------
+        numpy.ndarray [shape=(N,)], float64
+            Radiance, clipped to 0 to 1.
+        """
         out = np.zeros(len(origins))
         idx = np.arange(len(origins))
         weight = np.ones(len(origins))
@@ -167,8 +233,23 @@ class World:
         return np.clip(out, 0.0, 1.0)
 
     def sensor_range(self, origins: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-        """Path length (N,) a depth sensor reports along each ray, 0 for no return: through glass
-        to what lies beyond (or nothing), off a mirror to the phantom behind it."""
+        """Path length (N,) a depth sensor reports along each ray, 0 for no return.
+
+        Through glass to what lies beyond (or nothing, for a pane the sensor does not see
+        through), off a mirror to the phantom behind it; a ray that hits nothing returns nothing.
+
+        Parameters
+        ----------
+        origins : numpy.ndarray [shape=(N, 3)]
+            Ray origins in metres.
+        dirs : numpy.ndarray [shape=(N, 3)]
+            Unit ray directions.
+
+        Returns
+        -------
+        numpy.ndarray [shape=(N,)], float64
+            Path length in metres along the (possibly reflected) ray, 0 for no return.
+        """
         total = np.zeros(len(origins))
         valid = np.ones(len(origins), bool)
         idx = np.arange(len(origins))
@@ -201,7 +282,24 @@ def _reflect(d: np.ndarray, n: np.ndarray) -> np.ndarray:
 
 
 def render_view(world: World | Scene, pose: np.ndarray, *, camera: Camera = Camera()) -> View:
-    """Render a grayscale image and a depth frame from a camera-to-world ``pose`` (4, 4)."""
+    """Render a grayscale image and a depth frame from a camera-to-world ``pose`` (4, 4).
+
+    Parameters
+    ----------
+    world : World or Scene
+        What to render (a scene is made into a :class:`World` first, at some cost: pass a World
+        to render many frames).
+    pose : numpy.ndarray [shape=(4, 4)]
+        Camera-to-world pose (OpenCV axes; :func:`vrecho.camera.camera_pose`), metres.
+    camera : vrecho.camera.Camera
+        Image size and field of view (default ``Camera()``: 320 x 240 pixels, 65 degrees).
+
+    Returns
+    -------
+    vrecho.camera.View
+        ``gray`` (H, W) float32 in [0, 1]; ``depth`` (H, W) float32 z-depth in metres, 0 where
+        the sensor returns nothing or beyond 10 m; the intrinsics (3, 3) and ``pose``.
+    """
     world = World(world) if isinstance(world, Scene) else world
     K = camera.intrinsics
     v, u = np.mgrid[0:camera.height, 0:camera.width]
@@ -224,9 +322,28 @@ def crop(world: World | Scene, pose: DevicePose, index: int | None = None, *, sh
     Rays from the camera through a grid over the discontinuity's rectangle, widened by
     ``margin`` on each side: the perspective view of that region, resampled to ``shape``.
 
+    Parameters
+    ----------
+    world : World or Scene
+        What to look at (a scene is made into a :class:`World` first).
+    pose : DevicePose
+        The device; the camera is at its microphone.
+    index : int, optional
+        The discontinuity (the pose's target by default).
+    shape : tuple of (int, int)
+        Rows and columns of the crop (default (64, 25)).
+    margin : float
+        Widening on each side, as a fraction of the rectangle's width and height (default 0.15).
+
     Returns
     -------
-    numpy.ndarray, shape (64, 25), uint8
+    numpy.ndarray [shape=shape, (64, 25) by default], uint8
+        The grayscale crop, 0 to 255.
+
+    Raises
+    ------
+    VrechoError
+        If there is no such discontinuity (or the pose has no target and no ``index`` is given).
     """
     world = World(world) if isinstance(world, Scene) else world
     scene = world.scene

@@ -23,7 +23,29 @@ from .scoring import SceneTruth
 
 
 def walkthrough(scene: Scene, *, n_frames: int = 60, camera: Camera = Camera(), progress: bool = False) -> list[View]:
-    """Frames rendered along the scene's camera path, evenly spaced in time."""
+    """Frames rendered along the scene's camera path, evenly spaced in time.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene, with a ``camera_path``.
+    n_frames : int
+        Number of frames, at least 2 (default 60).
+    camera : vrecho.camera.Camera
+        Image size and field of view (default ``Camera()``).
+    progress : bool
+        Whether to show a progress bar.
+
+    Returns
+    -------
+    list of vrecho.camera.View
+        The frames, in the path's order.
+
+    Raises
+    ------
+    VrechoError
+        If the scene has no camera path or ``n_frames`` is less than 2.
+    """
     if scene.camera_path is None:
         raise VrechoError(f"scene {scene.name!r}: no camera_path to walk")
     if n_frames < 2:
@@ -37,9 +59,35 @@ def walkthrough(scene: Scene, *, n_frames: int = 60, camera: Camera = Camera(), 
 
 def scan_scene(scene: Scene, *, n_frames: int = 60, camera: Camera = Camera(), voxel_m: float = 0.03,
                progress: bool = False) -> Scan:
-    """The simulated phone scan of a scene: its walkthrough (the scene's camera path, or
-    :func:`~vrecho.sim.scenes.walkthrough_path`) fused into a mesh. No echoes yet: the
-    reconstruction asks :func:`hear_echoes`'s ``hear`` for them where frames look at a hole."""
+    """The simulated phone scan of a scene: its walkthrough fused into a mesh.
+
+    The walkthrough follows the scene's camera path, or
+    :func:`~vrecho.sim.scenes.walkthrough_path`. No echoes yet: the reconstruction asks
+    :func:`hear_echoes`'s ``hear`` for them where frames look at a hole.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene to scan.
+    n_frames : int
+        Number of walkthrough frames, at least 2 (default 60).
+    camera : vrecho.camera.Camera
+        Image size and field of view (default ``Camera()``).
+    voxel_m : float
+        Voxel size of the fusion in metres (default 0.03).
+    progress : bool
+        Whether to show progress bars.
+
+    Returns
+    -------
+    vrecho.reconstruct.scan.Scan
+        The frames and the fused mesh, with no echoes.
+
+    Raises
+    ------
+    VrechoError
+        If ``n_frames`` is less than 2.
+    """
     if scene.camera_path is None:
         scene = dataclasses.replace(scene, camera_path=walkthrough_path(scene))
     views = walkthrough(scene, n_frames=n_frames, camera=camera, progress=progress)
@@ -47,8 +95,31 @@ def scan_scene(scene: Scene, *, n_frames: int = 60, camera: Camera = Camera(), v
 
 
 def simulate_echoes(scene: Scene, views: list[View], frames, *, seed: int = 0, progress: bool = False) -> Echoes:
-    """What the device hears at the given walkthrough frames while it plays vrecho's probe
-    (pyroomacoustics, the recording conditions of PROTOCOL.md drawn per frame)."""
+    """What the device hears at the given walkthrough frames while it plays vrecho's probe.
+
+    Simulated with pyroomacoustics, the recording conditions of PROTOCOL.md drawn per frame
+    (:func:`~vrecho.sim.acoustics.recording_conditions`) from ``seed`` and the frame's index, so
+    a frame sounds the same whichever others are asked for with it.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene heard.
+    views : list of vrecho.camera.View
+        The walkthrough's frames; the device stands where each camera is.
+    frames : iterable of int
+        Indices into ``views`` (repeats are heard once, in increasing order).
+    seed : int
+        Seed of the recordings (default 0).
+    progress : bool
+        Whether to show a progress bar.
+
+    Returns
+    -------
+    vrecho.reconstruct.scan.Echoes
+        ``frame`` (K,) the sorted indices, ``audio`` (K, 44100) float32 1 s frames at 44 100 Hz,
+        and the probe as ``emitted``.
+    """
     frames = sorted(set(int(i) for i in frames))
     sound = probe()
     audio = np.zeros((len(frames), FS), np.float32)
@@ -61,15 +132,55 @@ def simulate_echoes(scene: Scene, views: list[View], frames, *, seed: int = 0, p
 
 
 def hear_echoes(scene: Scene, *, seed: int = 0, progress: bool = False) -> Callable[[list[View], object], Echoes]:
-    """What the device hears in ``scene``, as :func:`vrecho.reconstruct.reconstruct` asks for it:
-    ``hear(views, frames)`` is :func:`simulate_echoes` at those frames."""
+    """What the device hears in ``scene``, as :func:`vrecho.reconstruct.reconstruct` asks for it.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene heard.
+    seed : int
+        Seed of the recordings (default 0).
+    progress : bool
+        Whether to show a progress bar.
+
+    Returns
+    -------
+    callable
+        ``hear(views, frames)``: :func:`simulate_echoes` at those frames.
+    """
     return functools.partial(simulate_echoes, scene, seed=seed, progress=progress)
 
 
 def simulate_scene(scene: Scene, *, n_frames: int = 60, seed: int = 0,
                    progress: bool = False) -> tuple[Scan, Callable[[list[View], object], Echoes], SceneTruth]:
-    """What the ``vrecho`` commands run on for a scene (the simulator's entry point, group
-    ``vrecho.simulators``): its scan (:func:`scan_scene` with ``n_frames`` walkthrough frames),
-    what the device hears at a frame (:func:`hear_echoes`) and the truth (:class:`SceneTruth`)."""
+    """What the ``vrecho`` commands run on for a scene.
+
+    The simulator's entry point, group ``vrecho.simulators``.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    n_frames : int
+        Number of walkthrough frames, at least 2 (default 60).
+    seed : int
+        Seed of the recordings (default 0).
+    progress : bool
+        Whether to show progress bars.
+
+    Returns
+    -------
+    scan : vrecho.reconstruct.scan.Scan
+        Its scan (:func:`scan_scene` with ``n_frames`` walkthrough frames).
+    hear : callable
+        What the device hears at a frame (:func:`hear_echoes`).
+    truth : SceneTruth
+        The truth.
+
+    Raises
+    ------
+    VrechoError
+        If ``n_frames`` is less than 2.
+    """
     return scan_scene(scene, n_frames=n_frames, progress=progress), hear_echoes(scene, seed=seed, progress=progress), \
         SceneTruth(scene)

@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import VrechoError
-from ..scene import (BANDS_HZ, DEPTH_RANGE_M, HEAVY_GLASS, KINDS, MAX_INCIDENCE_DEG, MIC_ABOVE_EMITTER_M, MIRROR,
-                     WINDOW_GLASS, CameraPath, DevicePose, Discontinuity, Material, Room, Scene, SoundSource,
-                     check_number)
+from ..device import MIC_ABOVE_EMITTER_M, DevicePose
+from ..errors import VrechoError, check_number
+from ..materials import BANDS_HZ, HEAVY_GLASS, MIRROR, WINDOW_GLASS, Material
+from ..camera import CameraPath
+from ..scene import DEPTH_RANGE_M, KINDS, MAX_INCIDENCE_DEG, Discontinuity, Room, Scene, SoundSource
 from ..signals import SOUNDS
-
 
 WALL_MATERIALS = ("plasterboard", "brickwork", "brick_wall_rough", "ceramic_tiles", "rough_concrete",
                   "unpainted_concrete", "wooden_lining", "wood_1.6cm")
@@ -30,6 +30,37 @@ def face(scene: Scene, index: int, depth_m: float, *, offset_u_m: float = 0.0, o
 
     The emitter stands on the discontinuity's normal through its centre, shifted by
     ``offset_u_m`` along the wall and ``offset_z_m`` in height, turned by yaw (about z) and pitch.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    index : int
+        The discontinuity to face.
+    depth_m : float
+        Distance from the wall's plane in metres (positive: in front of it).
+    offset_u_m, offset_z_m : float
+        Shift along the wall and in height from the discontinuity's centre, in metres.
+    yaw_deg, pitch_deg : float
+        Turn about the vertical axis and tilt up, in degrees (0: facing the wall squarely).
+
+    Returns
+    -------
+    DevicePose
+        The pose, its target ``index``, up along z.
+
+    Raises
+    ------
+    VrechoError
+        If ``depth_m`` is not a positive finite number, or the device would be outside the room.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> scene = random_scene(np.random.default_rng(0))
+    >>> pose = face(scene, 0, 1.0)
+    >>> pose.target, round(scene.depth_m(pose), 3)
+    (0, 1.0)
     """
     depth_m = check_number(depth_m, "depth_m")
     if depth_m <= 0:
@@ -58,6 +89,24 @@ def _sample_depth(rng: np.random.Generator, max_depth: float) -> float:
 
 
 def closed_absorption(kind: str, rng: np.random.Generator) -> tuple[float, ...]:
+    """Absorption coefficients of a random pane of glass or mirror.
+
+    Glass lies between heavy and window glass (a random blend, jittered per band); anything
+    else is a mirror, its coefficients scaled by 0.8 to 1.2 per band.
+
+    Parameters
+    ----------
+    kind : str
+        "glass", or "mirror".
+    rng : numpy.random.Generator
+        Source of the draw.
+
+    Returns
+    -------
+    tuple of float
+        One coefficient per octave band of :data:`vrecho.scene.BANDS_HZ` (7), rounded to 4
+        decimals.
+    """
     if kind == "glass":
         t = np.clip(rng.uniform() + rng.uniform(-0.1, 0.1, len(BANDS_HZ)), 0, 1)
         return tuple(np.round(np.array(HEAVY_GLASS) * (1 - t) + np.array(WINDOW_GLASS) * t, 4))
@@ -70,10 +119,41 @@ def random_scene(rng: np.random.Generator, name: str = "scene", *, n_poses: int 
 
     Rooms 2.5 to 6 m on a side (a box, or a box with one corner cut), 2.4 to 3 m high, with walls,
     floor and ceiling of pyroomacoustics' database; 1 to 3 discontinuities (open, glass, mirror,
-    0.4 to 2.5 m on a side, glass and mirror coefficients drawn per scene); ``n_poses`` device poses
-    each facing a discontinuity from 0.25 to 3 m within 15 degrees of its normal; ``n_sources``
-    ambient sources playing one of the 16 sounds; the device's loudspeaker directivity
-    (``emitter_p``) from 0.5 (cardioid) to 0.9.
+    0.4 to 2.5 m on a side, glass and mirror coefficients drawn per scene; at most one per wall);
+    ``n_poses`` device poses each facing a discontinuity (in turn) from 0.25 to 3 m within
+    15 degrees of its normal; ``n_sources`` ambient sources playing one of the 16 sounds (gain
+    -6 to 6 dB); the device's loudspeaker directivity (``emitter_p``) from 0.5 (cardioid) to 0.9.
+    The scene has no camera path (see :func:`walkthrough_path`).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of the draw: the same seed gives the same scene.
+    name : str
+        The scene's name (default "scene"); it also seeds the exterior the camera sees.
+    n_poses : int
+        Number of device poses (default 8).
+    n_sources : int
+        Number of ambient sound sources (default 2).
+    n_discontinuities : tuple of (int, int)
+        Fewest and most discontinuities, both included (default (1, 3)).
+
+    Returns
+    -------
+    Scene
+        The scene, validated.
+
+    Raises
+    ------
+    RuntimeError
+        If the device could not be placed in 200 tries.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> scene = random_scene(np.random.default_rng(0))
+    >>> len(scene.poses), len(scene.sources), len(scene.discontinuities)
+    (8, 2, 1)
     """
     for _ in range(200):
         scene = _try_random_scene(rng, name, n_poses, n_sources, n_discontinuities)
@@ -186,6 +266,34 @@ def walkthrough_path(scene: Scene, *, distance_m: float = 1.6, height_m: float =
     would drown an opening's silence), and with the whole discontinuity in the camera's view.
     What a person scanning the room would do; the scenes of :func:`random_scene` have no path of
     their own.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    distance_m : float
+        Preferred distance from the wall in metres (default 1.6).
+    height_m : float
+        Preferred camera height in metres (default 1.5).
+    duration_s : float
+        Length of the walk in seconds (default 40).
+    reach_m : tuple of (float, float)
+        Lowest and highest camera heights the arm reaches, in metres (default 0.8 to 1.9).
+    clear_m : float
+        How far, in metres, every other surface's distance must stay from the discontinuity's
+        (default 0.35).
+
+    Returns
+    -------
+    vrecho.camera.CameraPath
+        Keyframe positions and look-at points, ending where it starts.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> path = walkthrough_path(random_scene(np.random.default_rng(0)))
+    >>> path.positions.shape, path.duration_s
+    ((12, 3), 40.0)
     """
     room = scene.room
     positions, targets = [], []

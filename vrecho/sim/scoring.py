@@ -22,16 +22,35 @@ import copy
 
 import numpy as np
 
+from ..geometry import distance_to_polygon, point_in_polygon, triangulate_polygon
 from ..reconstruct.decide import Decision
 from ..reconstruct.discontinuities import Hole
-from ..geometry import distance_to_polygon, point_in_polygon, triangulate_polygon
 from ..scene import Scene
 from .ambient import SimulatedCapture, hear_scene
 from .render import World
 
 
 def match_truth(scene: Scene, hole: Hole, *, max_offset_m: float = 0.15) -> int | None:
-    """The scene's discontinuity a hole belongs to (largest overlap on the same wall), or None."""
+    """The scene's discontinuity a hole belongs to (largest overlap on the same wall), or None.
+
+    A discontinuity counts where the hole's plane faces into the room from its wall (within
+    10 degrees), lies within ``max_offset_m`` of the wall's plane, and the hole's extent along
+    the wall and in height overlaps the discontinuity's rectangle.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    hole : vrecho.reconstruct.discontinuities.Hole
+        A hole found in a scan.
+    max_offset_m : float
+        Largest distance of the hole from the wall's plane in metres (default 0.15).
+
+    Returns
+    -------
+    int or None
+        Index of the discontinuity of largest overlap, or None where none overlaps.
+    """
     best, best_area = None, 0.0
     polygon = hole.polygon()
     for k, d in enumerate(scene.discontinuities):
@@ -50,8 +69,25 @@ def match_truth(scene: Scene, hole: Hole, *, max_offset_m: float = 0.15) -> int 
 
 
 def oracle(scene: Scene, holes_: list[Hole]) -> list[Decision]:
-    """The true answer for each hole: what a perfect EchoCNN would say. A hole that is none of
-    the scene's discontinuities is plain wall the camera failed to see: closed, no material."""
+    """The true answer for each hole: what a perfect EchoCNN would say.
+
+    A hole that is none of the scene's discontinuities is plain wall the camera failed to see:
+    closed, material "wall", on the nearest of the room's walls.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    holes_ : list of vrecho.reconstruct.discontinuities.Hole
+        Holes found in a scan.
+
+    Returns
+    -------
+    list of vrecho.reconstruct.decide.Decision
+        One per hole, source "oracle", confidence 1: "open"; or "closed" with the material
+        (glass, mirror or wall), the true wall's plane at the hole's centre as ``offset_m``
+        (metres), and ``p_mirror`` 1 for a mirror, 0 otherwise.
+    """
     out = []
     for hole in holes_:
         k = match_truth(scene, hole)
@@ -72,8 +108,25 @@ def oracle(scene: Scene, holes_: list[Hole]) -> list[Decision]:
 
 
 class Oracle:
-    """The truth as a decider of :func:`vrecho.reconstruct.reconstruct` (``decide=Oracle(scene)``,
-    ``vrecho reconstruct --labels oracle``): :func:`oracle`'s answers, no recordings needed."""
+    """The truth as a decider of :func:`vrecho.reconstruct.reconstruct`.
+
+    ``decide=Oracle(scene)``, ``vrecho reconstruct --labels oracle``: :func:`oracle`'s answers,
+    no recordings needed.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene whose truth decides.
+
+    Attributes
+    ----------
+    label : str
+        "oracle".
+    hears : bool
+        False: the decider needs no echoes.
+    scene : Scene
+        The scene.
+    """
 
     label = "oracle"
     hears = False
@@ -82,6 +135,20 @@ class Oracle:
         self.scene = scene
 
     def __call__(self, holes_: list[Hole], views=None, echoes=None, *, mesh=None, walls=()) -> list[Decision]:
+        """:func:`oracle`'s answers for ``holes_``.
+
+        Parameters
+        ----------
+        holes_ : list of vrecho.reconstruct.discontinuities.Hole
+            Holes found in a scan.
+        views, echoes, mesh, walls
+            What the reconstruction passes every decider; ignored.
+
+        Returns
+        -------
+        list of vrecho.reconstruct.decide.Decision
+            One per hole.
+        """
         return oracle(self.scene, holes_)
 
 
@@ -118,13 +185,47 @@ def _area(mesh) -> float:
 
 
 def capped_density(mesh, density_per_m2: float, *, max_points: int = 3_000_000) -> float:
-    """``density_per_m2``, lowered where the mesh is so large (a generic hole filler's triangles
-    can span the outdoors) that more than ``max_points`` would be drawn."""
+    """``density_per_m2``, lowered where the mesh is so large that more than ``max_points``
+    would be drawn.
+
+    A generic hole filler's triangles can span the outdoors.
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh
+        The mesh to be sampled.
+    density_per_m2 : float
+        Wanted points per square metre.
+    max_points : int
+        Most points to draw (default 3 000 000).
+
+    Returns
+    -------
+    float
+        Points per square metre.
+    """
     return min(density_per_m2, max_points / max(_area(mesh), 1e-9))
 
 
 def sample_surface(mesh, density_per_m2: float, *, seed: int = 0) -> np.ndarray:
-    """Points spread uniformly over a mesh's area, ``density_per_m2`` of them per square metre."""
+    """Points spread uniformly over a mesh's area, ``density_per_m2`` of them per square metre.
+
+    Each triangle gets a Poisson number of points of mean its area times the density.
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh
+        The mesh.
+    density_per_m2 : float
+        Mean points per square metre.
+    seed : int
+        Seed of the draw (default 0).
+
+    Returns
+    -------
+    numpy.ndarray [shape=(N, 3)], float64
+        The points in metres; none for a mesh without triangles.
+    """
     v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
     if not len(t):
         return np.zeros((0, 3))
@@ -153,8 +254,24 @@ def _sample_polygons(polygons: list[np.ndarray], n: int, seed: int = 0) -> np.nd
 
 def added_surface(initial, mesh, *, near: tuple[np.ndarray, np.ndarray] | None = None,
                   density_per_m2: float = 10_000.0) -> np.ndarray:
-    """Points (N, 3) on the parts of ``mesh`` more than 2 cm from ``initial`` (within the box
-    ``near`` = (lo, hi) when given)."""
+    """Points (N, 3) on the parts of ``mesh`` more than 2 cm from ``initial``.
+
+    Parameters
+    ----------
+    initial : open3d.geometry.TriangleMesh
+        The scan before repair.
+    mesh : open3d.geometry.TriangleMesh
+        The repaired mesh.
+    near : tuple of (numpy.ndarray, numpy.ndarray), optional
+        A box (lo, hi), each (3,) in metres: only triangles whose centroid lies inside count.
+    density_per_m2 : float
+        Points per square metre (default 10 000), capped by :func:`capped_density`.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(N, 3)], float64
+        The added surface's points in metres.
+    """
     import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
 
     rc = _rc(initial)
@@ -171,7 +288,28 @@ def added_surface(initial, mesh, *, near: tuple[np.ndarray, np.ndarray] | None =
 
 
 def phantom_area_m2(scene: Scene, mesh, *, world: World | None = None, density_per_m2: float = 400.0) -> float:
-    """Area of a mesh behind the room's walls and farther than 15 cm from any real surface."""
+    """Area of a mesh behind the room's walls and farther than 15 cm from any real surface.
+
+    Behind the walls: more than 10 cm outside the room's footprint; the real surfaces are the
+    room's and the exterior's (:class:`~vrecho.sim.render.World`).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    mesh : open3d.geometry.TriangleMesh
+        The mesh.
+    world : World, optional
+        The scene's :class:`~vrecho.sim.render.World`, to reuse (made here when not given).
+    density_per_m2 : float
+        Sampling density in points per square metre (default 400), capped by
+        :func:`capped_density`.
+
+    Returns
+    -------
+    float
+        The phantom area in square metres.
+    """
     world = World(scene) if world is None else world
     density_per_m2 = capped_density(mesh, density_per_m2)
     pts = sample_surface(mesh, density_per_m2, seed=1)
@@ -196,7 +334,33 @@ def _finite(mesh):
 
 
 def score(scene: Scene, initial, mesh, *, world: World | None = None, n_chamfer: int = 40_000) -> dict:
-    """The metrics of the module's docstring for ``mesh``, a repair of the scan ``initial``."""
+    """The metrics of the module's docstring for ``mesh``, a repair of the scan ``initial``.
+
+    Triangles with a non-finite vertex or one more than 10 km away are left out of both meshes
+    first.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene scanned.
+    initial : open3d.geometry.TriangleMesh
+        The scan before repair.
+    mesh : open3d.geometry.TriangleMesh
+        The repaired mesh.
+    world : World, optional
+        The scene's :class:`~vrecho.sim.render.World`, to reuse (made here when not given).
+    n_chamfer : int
+        About how many points the Chamfer distance samples on each side (default 40 000).
+
+    Returns
+    -------
+    dict
+        "closed_iou" (mean over glass and mirrors, None without any) and "closed_ious" (each);
+        "openings_filled" (None without openings) and "n_openings"; "phantom_m2_initial" and
+        "phantom_m2" (square metres); "phantom_removed" (None where the initial phantom area is
+        0.1 m2 or less); "depth_error_cm" (a list, per glass or mirror with more than 10 added
+        points on it); "chamfer_cm".
+    """
     world = World(scene) if world is None else world
     initial, mesh = _finite(initial), _finite(mesh)
     fp = scene.room.footprint
@@ -246,20 +410,65 @@ def score(scene: Scene, initial, mesh, *, world: World | None = None, n_chamfer:
 
 
 class SceneTruth:
-    """What the simulator knows of a scene that a command may ask: the answers
-    (:meth:`oracle`), the repair's metrics (:meth:`score`) and its sources heard along the
-    walkthrough (:meth:`captures`)."""
+    """What the simulator knows of a scene that a command may ask.
+
+    The answers (:meth:`oracle`), the repair's metrics (:meth:`score`) and its sources heard
+    along the walkthrough (:meth:`captures`).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene.
+    """
 
     def __init__(self, scene: Scene):
         self.scene = scene
 
     def oracle(self) -> Oracle:
+        """The scene's :class:`Oracle`, a decider for the reconstruction.
+
+        Returns
+        -------
+        Oracle
+            The truth as a decider.
+        """
         return Oracle(self.scene)
 
     def score(self, initial, repaired) -> dict:
-        """:func:`score` of a repair of the scan ``initial``."""
+        """:func:`score` of a repair of the scan ``initial``.
+
+        Parameters
+        ----------
+        initial : open3d.geometry.TriangleMesh
+            The scan before repair.
+        repaired : open3d.geometry.TriangleMesh
+            The repaired mesh.
+
+        Returns
+        -------
+        dict
+            The metrics, as :func:`score`.
+        """
         return score(self.scene, initial, repaired)
 
     def captures(self, rng, *, n_poses: int = 8) -> SimulatedCapture:
-        """The scene's sources heard by the headset along its walkthrough (:func:`~.ambient.hear_scene`)."""
+        """The scene's sources heard by the headset along its walkthrough (:func:`~.ambient.hear_scene`).
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+            Source of the sounds and the noise.
+        n_poses : int
+            Number of captures along the walkthrough (default 8).
+
+        Returns
+        -------
+        SimulatedCapture
+            The captures and each source's image at every microphone.
+
+        Raises
+        ------
+        VrechoError
+            If the scene has no sound sources.
+        """
         return hear_scene(self.scene, rng, n_poses=n_poses)

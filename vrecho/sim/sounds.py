@@ -22,7 +22,6 @@ import scipy.signal
 from ..errors import VrechoError
 from ..signals import SOUNDS, check_fs, colored_noise, emitted_sound
 
-
 KINDS: tuple[str, ...] = ("speech", "music", "hum")
 """Continuous ambient sounds; :data:`vrecho.signals.SOUNDS` names are accepted too."""
 
@@ -33,7 +32,38 @@ _VOWELS = ((730, 1090, 2440), (270, 2290, 3010), (300, 870, 2240), (530, 1840, 2
 
 
 def ambient_sound(kind: str, duration_s: float, fs: int, rng: np.random.Generator) -> np.ndarray:
-    """``duration_s`` of the named sound at ``fs`` Hz, peak 0.8 (float32)."""
+    """``duration_s`` of the named sound at ``fs`` Hz, peak 0.8 (float32).
+
+    Parameters
+    ----------
+    kind : str
+        "speech", "music", "hum" (:data:`KINDS`) or one of :data:`vrecho.signals.SOUNDS`
+        (repeated at random intervals).
+    duration_s : float
+        Length in seconds.
+    fs : int
+        Sample rate in Hz.
+    rng : numpy.random.Generator
+        Source of the sound: a different generator gives a different instance.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(round(duration_s * fs),)], float32
+        The sound, peak 0.8 (all zeros where it is silent).
+
+    Raises
+    ------
+    VrechoError
+        If ``kind`` is unknown, ``duration_s`` is not a positive finite number, or ``fs`` is not
+        a whole number of hertz of at least 8000.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x = ambient_sound("speech", 2.0, 16000, np.random.default_rng(0))
+    >>> x.shape, x.dtype, float(np.abs(x).max())
+    ((32000,), dtype('float32'), 0.800000011920929)
+    """
     fs = check_fs(fs)
     if not np.isfinite(duration_s) or duration_s <= 0:
         raise VrechoError(f"duration_s: expected a positive duration, got {duration_s!r}")

@@ -16,12 +16,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..camera import Camera, camera_pose
+from ..device import MIC_ABOVE_EMITTER_M
 from ..errors import VrechoError
-from ..scene import MIC_ABOVE_EMITTER_M, Scene
+from ..scene import Scene
 from ..signals import SPEED_OF_SOUND, colored_noise
 from .acoustics import Simulation, build_room, emitter_directivity
 from .render import render_view
-
 
 WALK_SIMULATION = Simulation(max_order=2, n_rays=0, length_s=0.06, air_absorption=True)
 
@@ -32,10 +32,26 @@ HEADSET_CAMERA = Camera(width=320, height=240, fov_deg=100.0)
 
 @dataclass
 class Walk:
-    """A walk's recording: ``mic`` (n,) at ``fs``; per pulse, ``pulse_times_s`` (emission, on the
-    stream's clock), ``distance_m`` (the emitter's true distance to the target's plane) and
-    ``position_m`` (K, 3) (the emitter's position) and ``forward`` (K, 3) (the wearer's facing,
-    unit: the heading swayed)."""
+    """A walk's recording, with the truth per pulse.
+
+    Parameters
+    ----------
+    mic : numpy.ndarray [shape=(n,)], float64
+        The microphone's signal at ``fs``.
+    fs : int
+        Sample rate in Hz.
+    pulse_times_s : numpy.ndarray [shape=(K,)]
+        Each pulse's emission, on the stream's clock, in seconds.
+    distance_m : numpy.ndarray [shape=(K,)]
+        The emitter's true distance to the target's plane in metres.
+    latency_s : float
+        The audio stream's output latency in seconds (0 to 5 ms), which the monitor does not
+        know: a pulse is emitted this much after its time on the stream's clock.
+    position_m : numpy.ndarray [shape=(K, 3)]
+        The emitter's position in metres.
+    forward : numpy.ndarray [shape=(K, 3)]
+        The wearer's facing, unit: the heading swayed.
+    """
 
     mic: np.ndarray
     fs: int
@@ -49,9 +65,48 @@ class Walk:
 def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: float, probe: np.ndarray,
                   period_s: float, fs: int, rng: np.random.Generator, plane: tuple[np.ndarray, np.ndarray],
                   *, stop_m: float = 0.15, snr_db: float | None = None, lead_s: float = 0.3) -> Walk:
-    """The microphone signal of a walk from ``start`` toward ``goal`` (emitter positions, metres)
-    at ``speed_mps``, stopping ``stop_m`` before the target's plane (``plane``: a point on it
-    and its unit normal). ``lead_s``: standing still at the start first."""
+    """The microphone signal of a walk from ``start`` toward ``goal`` at ``speed_mps``.
+
+    The wearer walks level (along the heading's horizontal part), stopping ``stop_m`` before
+    the target's plane, and the device plays ``probe`` every ``period_s`` (see the module's
+    docstring for the head's motion, the latency and the noise). The signal is scaled so that
+    the direct sound peaks at half scale.
+
+    Parameters
+    ----------
+    scene : Scene
+        The room walked in.
+    start, goal : numpy.ndarray [shape=(3,)]
+        Emitter positions in metres: where the walk starts, and a point it heads toward.
+    speed_mps : float
+        Walking speed in metres per second.
+    probe : numpy.ndarray [shape=(k,)]
+        The sound played at each pulse, at ``fs``.
+    period_s : float
+        Time between pulses in seconds.
+    fs : int
+        Sample rate in Hz.
+    rng : numpy.random.Generator
+        Source of the latency, the head's motion and the noise.
+    plane : tuple of (numpy.ndarray, numpy.ndarray)
+        The target's plane: a point on it and its unit normal, each (3,).
+    stop_m : float
+        Where the walk stops, in metres before the plane (default 0.15).
+    snr_db : float, optional
+        Pink background noise in dB below the direct sound (drawn from 20 to 40 dB by default).
+    lead_s : float
+        Time standing still at the start first, in seconds (default 0.3).
+
+    Returns
+    -------
+    Walk
+        The recording, to at most one period past the last pulse, and the truth.
+
+    Raises
+    ------
+    VrechoError
+        If the heading does not meet the target's plane within 60 degrees.
+    """
     import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
 
     start, goal = np.asarray(start, float), np.asarray(goal, float)
@@ -103,11 +158,29 @@ def simulate_walk(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps: 
 
 
 def headset_frames(world, walk: Walk, *, every: int = 6, latency_s: float = 0.05) -> list:
-    """What the headset's camera (:data:`vrecho.sim.walks.HEADSET_CAMERA`, at the microphone,
-    facing the wearer's way) shows along a walk: a frame at every ``every``-th pulse, arriving
-    ``latency_s`` after it. ``world``: the walk's scene as a :class:`vrecho.sim.render.World`.
-    Returns [(arrival time on the stream's clock, gray, depth, intrinsics)], for
-    :meth:`vrecho.headset.BoundaryMonitor.see`."""
+    """What the headset's camera shows along a walk.
+
+    The camera (:data:`vrecho.sim.walks.HEADSET_CAMERA`) is at the microphone, facing the
+    wearer's way: a frame at every ``every``-th pulse, arriving ``latency_s`` after it.
+
+    Parameters
+    ----------
+    world : World
+        The walk's scene as a :class:`vrecho.sim.render.World`.
+    walk : Walk
+        The walk, from :func:`simulate_walk`.
+    every : int
+        A frame at every ``every``-th pulse (default 6).
+    latency_s : float
+        The camera's latency in seconds (default 0.05).
+
+    Returns
+    -------
+    list of tuple
+        [(arrival time on the stream's clock in seconds, gray (240, 320) float32 in [0, 1],
+        depth (240, 320) float32 in metres, intrinsics (3, 3))], for
+        :meth:`vrecho.headset.BoundaryMonitor.see`.
+    """
     frames = []
     for k in range(0, len(walk.pulse_times_s), every):
         pose = camera_pose(walk.position_m[k] + [0.0, 0.0, MIC_ABOVE_EMITTER_M], walk.forward[k])
@@ -117,6 +190,23 @@ def headset_frames(world, walk: Walk, *, every: int = 6, latency_s: float = 0.05
 
 
 def echo_round_trip_s(distance_m: float) -> float:
-    """Seconds from emission to the echo of a surface ``distance_m`` straight ahead (microphone
-    7 cm above the emitter)."""
+    """Seconds from emission to the echo of a surface ``distance_m`` straight ahead.
+
+    The microphone is 7 cm above the emitter; sound travels at 343 m/s.
+
+    Parameters
+    ----------
+    distance_m : float
+        The surface's distance from the emitter in metres.
+
+    Returns
+    -------
+    float
+        The echo's arrival in seconds after emission.
+
+    Examples
+    --------
+    >>> round(echo_round_trip_s(1.0), 6)
+    0.005834
+    """
     return float(np.sqrt((2 * distance_m) ** 2 + MIC_ABOVE_EMITTER_M ** 2) / SPEED_OF_SOUND)
