@@ -3,8 +3,10 @@
 A phone or headset emits short pulses while it films; the echoes tell whether a hole in the scan
 is an opening, a pane of glass or a mirror, and how far away it is. The method, one idea a module:
 
-- ``scene`` (rooms, surfaces, the device; JSON), ``camera`` (poses, intrinsics, projection,
-  crops), ``signals`` (the 16 emitted sounds, the probe, matched filters), ``features`` (log-mel
+- ``scene`` (rooms, discontinuities, sources; the data model and its JSON), ``device`` (the
+  capture device and its microphone arrays), ``materials`` (acoustic absorption per band),
+  ``geometry`` (polygons), ``camera`` (poses, intrinsics, projection, crops, walkthrough
+  paths), ``signals`` (the 16 emitted sounds, the probe, matched filters), ``features`` (log-mel
   and echo features), ``models`` (EchoCNN and the baselines), ``classifier``
   (:func:`load_classifier`: shipped weights, ``predict``), ``io``, ``colmap``, ``errors``;
 - ``reconstruct/`` (the scan, its discontinuities, what each is, the repair), ``capture/`` (real
