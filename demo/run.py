@@ -31,7 +31,7 @@ import usd_export
 from vrecho.app.figures import below
 from vrecho.app.scans import write
 from vrecho.errors import VrechoError
-from vrecho.headset import BoundaryMonitor, ranging_probe
+from vrecho.headset import BoundaryMonitor
 from vrecho.io import atomic_write_text, ensure_writable_dir
 from vrecho.reconstruct import reconstruct
 from vrecho.scene import Scene, builtin_scene, load_scene
@@ -246,9 +246,8 @@ def boundary_walks(scene: Scene, rng: np.random.Generator, *, progress: bool = F
                       if scene.room.contains((target - normal * s)[None], margin_m=0.3)[0]), None)
         if start is None:
             continue  # no room to walk toward it
-        mon = BoundaryMonitor(fs)
-        walk = simulate_walk(scene, start, start + normal, WALK_SPEED_MPS, ranging_probe(fs), mon.period / fs, fs,
-                             rng, (origin, normal))
+        mon = BoundaryMonitor(fs, seed=int(rng.integers(2 ** 32)))
+        walk = simulate_walk(scene, start, start + normal, WALK_SPEED_MPS, mon.schedule, (origin, normal), rng)
         n10 = fs // 100
         frames = headset_frames(world, walk)
         positions, distances, levels = [], [], []
@@ -258,7 +257,8 @@ def boundary_walks(scene: Scene, rng: np.random.Generator, *, progress: bool = F
             level = alert.level
             while frames and frames[0][0] <= (i + n10) / fs:
                 mon.see(*frames.pop(0)[1:])
-            now = min((i + n10) // mon.period, len(walk.distance_m) - 1)  # the pulse being played
+            now = min(int(np.searchsorted(walk.pulse_times_s, (i + n10) / fs - walk.output_lag_s)),
+                      len(walk.distance_m) - 1)  # the pulse being played
             positions.append(walk.position_m[now])
             distances.append(walk.distance_m[now])
             levels.append(level)

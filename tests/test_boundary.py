@@ -6,15 +6,21 @@ import numpy as np
 import pytest
 
 from conftest import small_room
-from vrecho.headset import BoundaryMonitor, ranging_probe
 from vrecho.errors import VrechoError
+from vrecho.headset import BoundaryMonitor
 from vrecho.sim.render import World
-from vrecho.sim.walks import echo_round_trip_s, headset_frames, simulate_walk
+from vrecho.sim.walks import AudioLink, echo_round_trip_s, headset_frames, other_headsets, record_walk, simulate_walk, \
+    walk_responses
 
 FS = 48000
+SEED = 3  # the monitor's dither: the walks are simulated on its schedule
 
 
-def _walk(kind: str, speed: float = 1.0, seed: int = 0):
+def _monitor(**kwargs) -> BoundaryMonitor:
+    return BoundaryMonitor(FS, seed=SEED, **kwargs)
+
+
+def _geometry(kind: str):
     scene = small_room()
     if kind == "open":  # the small room's opening made a door, reaching the floor
         d = scene.discontinuities[2]
@@ -23,9 +29,13 @@ def _walk(kind: str, speed: float = 1.0, seed: int = 0):
     d = scene.discontinuities[wall]
     origin, u, normal = scene.room.wall_frame(wall)
     target = origin + d.center_u_m * u + [0.0, 0.0, 1.55]
-    start = target - 2.4 * normal
-    return simulate_walk(scene, start, target, speed, ranging_probe(FS), 0.04, FS, np.random.default_rng(seed),
-                         (origin, normal), stop_m=0.15 if kind == "glass" else 0.0)
+    return scene, target - 2.4 * normal, target, (origin, normal)
+
+
+def _walk(kind: str, speed: float = 1.0, seed: int = 0):
+    scene, start, target, plane = _geometry(kind)
+    return simulate_walk(scene, start, target, speed, _monitor().schedule, plane, np.random.default_rng(seed),
+                         stop_m=0.15 if kind == "glass" else 0.0)
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +51,7 @@ def door():
 def _run(walk, mic=None, sizes=None, rng=None, frames=()):
     """The monitor over a walk, in blocks; ``frames``: (time, gray, depth, intrinsics) shown to
     it once the block that reaches their time has been processed."""
-    mon = BoundaryMonitor(FS)
+    mon = _monitor()
     x = walk.mic if mic is None else mic
     frames = list(frames)
     alerts, ends, i = [], [], 0
@@ -58,8 +68,12 @@ def _run(walk, mic=None, sizes=None, rng=None, frames=()):
 
 
 def _true_distance(walk, t_s):
-    k = min(int(t_s / 0.04), len(walk.distance_m) - 1)
-    return walk.distance_m[k]
+    return walk.distance_at(t_s)
+
+
+def _pulse(walk, a):
+    """The pulse that measured an alert's distance."""
+    return int(np.argmin(np.abs(walk.pulse_times_s - a.pulse_time_s)))
 
 
 def _first(alerts, ends, walk, level):
@@ -75,14 +89,16 @@ def test_walking_into_glass_raises_caution_then_stop(glass):
     assert a is not None and at >= 0.5, at  # caution before 0.5 m
     s, end, at_stop = _first(alerts, ends, glass, ("stop",))
     assert s is not None and 0.2 <= at_stop <= 0.55 and s.surface == "closed"
-    # The alert comes in the block in which the echo that crossed 0.5 m ended.
-    k = int(round(s.pulse_time_s * FS / mon.period))
-    echo_end = k * mon.period / FS + glass.latency_s + echo_round_trip_s(s.distance_m) + len(mon.probe) / FS
-    assert (end - 480) / FS < echo_end <= end / FS
+    # Stop comes no later than the block in which the echo of the first pulse sent from within
+    # 0.5 m ends (sooner when the walk so far says the wearer is there by now).
+    k = int(np.argmax(glass.distance_m < 0.5))
+    echo_end = glass.arrival[k] / FS + echo_round_trip_s(glass.distance_m[k]) + len(mon.probe) / FS
+    assert end / FS < echo_end + 480 / FS
     # Distances to a centimetre: against the truth at the pulse that measured them.
-    err = [abs(a.distance_m - glass.distance_m[int(round(a.pulse_time_s * FS / mon.period))])
+    err = [abs(a.distance_m - glass.distance_m[_pulse(glass, a)])
            for a in alerts if a.distance_m is not None and a.pulse_time_s is not None]
     assert len(err) > 20 and np.median(err) < 0.01
+    assert all(abs(a.latency_s - glass.latency_s) < 1e-4 for a in alerts[20:])  # locked on its round trip
     assert 0.7 < alerts[-1].closing_speed_mps < 1.3  # the walk's 1 m/s
 
 
@@ -103,15 +119,20 @@ def test_walking_through_a_door_raises_nothing(door):
 
 
 def test_the_speaker_gets_the_probe_on_the_same_clock():
-    mon = BoundaryMonitor(44100)
+    mon = BoundaryMonitor(44100, seed=SEED)
     out = np.zeros(0)
     for n in (100, 441, 1000, 2048, 7):  # block sizes change from call to call
         block = np.zeros(n)
         mon.process(np.full(n, 1e-4), block)
         out = np.r_[out, block]
-    probe, period = mon.probe, mon.period
-    assert np.allclose(out[:len(probe)], probe) and np.allclose(out[period:period + len(probe)], probe)
-    assert np.all(out[len(probe):period] == 0)
+    probe, e0, e1 = mon.probe, mon.schedule.emission(0), mon.schedule.emission(1)
+    assert np.allclose(out[e0:e0 + len(probe)], probe) and np.allclose(out[e1:e1 + len(probe)], probe)
+    assert np.all(out[:e0] == 0) and np.all(out[e0 + len(probe):e1] == 0)
+    # Pulses leave a period apart plus a dither of up to 5 ms, drawn from the monitor's seed.
+    gaps = np.diff([mon.schedule.emission(k) for k in range(200)])
+    assert gaps.min() >= mon.period - 0.005 * 44100 and gaps.max() <= mon.period + 0.005 * 44100 and gaps.std() > 20
+    other = BoundaryMonitor(44100)  # a fresh seed: another headset's pulses fall elsewhere
+    assert [other.schedule.emission(k) for k in range(5)] != [mon.schedule.emission(k) for k in range(5)]
     stereo = np.zeros((256, 2))
     mon.process(np.zeros((256, 2)), stereo)  # (frames, channels) blocks, as sounddevice gives them
     assert np.array_equal(stereo[:, 0], stereo[:, 1])
@@ -162,14 +183,31 @@ def test_a_dropout_late_in_every_pulse_keeps_the_echoes_before_it(glass):
 
 
 def test_no_echo_at_all_is_clear_and_says_so():
-    mon = BoundaryMonitor(FS)
+    # The loudspeaker heard 0.1 s later, nothing echoing: locked, clear, "no_echo".
+    mon = _monitor()
     rng = np.random.default_rng(0)
+    heard = np.zeros(int(0.1 * FS))
     for _ in range(100):
-        a = mon.process(1e-3 * rng.standard_normal(480))
+        out = np.zeros(480)
+        a = mon.process(0.3 * heard[:480] + 1e-4 * rng.standard_normal(480), out)
+        heard = np.r_[heard[480:], out]
     assert a.level == "clear" and a.distance_m is None and "no_echo" in a.flags
+    assert abs(a.latency_s - 0.1 + 0.07 / 343) < 1e-4  # the mic offset's flight taken out
     for _ in range(10):
         a = mon.process(np.zeros(480))  # silence: a dropout, not a crash
     assert a.level == "clear"
+
+
+def test_a_muted_loudspeaker_says_so_within_a_second_and_never_alarms():
+    mon = _monitor()
+    rng = np.random.default_rng(0)
+    flags = []
+    for i in range(150):
+        a = mon.process(1e-3 * rng.standard_normal(480), np.zeros(480))  # the probe never reaches the mic
+        flags.append(a.flags)
+        assert a.level == "clear" and a.latency_s is None
+    assert all("unlocked" in f for f in flags)
+    assert "no_direct_sound" in flags[105] and "no_direct_sound" not in flags[50]
 
 
 def test_bad_settings_and_blocks_say_why():
@@ -184,3 +222,84 @@ def test_bad_settings_and_blocks_say_why():
         mon.process(np.zeros((4, 4, 4)))
     with pytest.raises(VrechoError, match="speaker"):
         mon.process(np.zeros(480), np.zeros(100))
+
+
+# -- The audio stream's round trip, other headsets (issue 25) -----------------------------------------------
+
+@pytest.fixture(scope="module")
+def glass_room():
+    """The glass walk's room, simulated once, to be heard through many streams."""
+    scene, start, target, plane = _geometry("glass")
+    return walk_responses(scene, start, target, 1.2, _monitor().schedule, plane, np.random.default_rng(5))
+
+
+def _judged(walk, alerts, ends):
+    """Caution's true distance, the distance errors against each measuring pulse, the latencies."""
+    _, _, at = _first(alerts, ends, walk, ("caution", "stop"))
+    err = [abs(a.distance_m - walk.distance_m[_pulse(walk, a)]) for a in alerts if a.distance_m is not None]
+    return at, np.median(err), [a.latency_s for a in alerts]
+
+
+@pytest.mark.parametrize("latency_s", [0.0, 0.073, 0.231])
+def test_the_monitor_finds_its_round_trip_however_long(glass_room, latency_s):
+    # Up to six periods of 40 ms: the dithered pulses tell which pulse an arrival is.
+    walk = record_walk(glass_room, np.random.default_rng(1), link=AudioLink(latency_s, output_share=0.3))
+    mon, alerts, ends = _run(walk)
+    at, err, latencies = _judged(walk, alerts, ends)
+    assert at is not None and at >= 0.5 and err < 0.01
+    locked = [lat for lat in latencies if lat is not None]
+    assert latencies.index(locked[0]) * 0.01 < latency_s + 0.2  # locked within three pulses of hearing one
+    assert all(abs(lat - latency_s) < 1e-4 for lat in locked)
+    assert all(a.level == "clear" for a in alerts if a.latency_s is None)  # no alarm unlocked
+
+
+def test_a_round_trip_that_steps_after_an_underrun_is_followed(glass_room):
+    # An underrun adds a 10 ms block to the round trip, an overrun later takes 21 ms off.
+    link = AudioLink(0.04, steps=((0.9, 480), (1.5, -1024)), drift_ppm=80)
+    walk = record_walk(glass_room, np.random.default_rng(2), link=link)
+    mon, alerts, ends = _run(walk, sizes=(16, 4097), rng=np.random.default_rng(3))  # blocks of 16 to 4096
+    at, err, latencies = _judged(walk, alerts, ends)
+    assert at is not None and at >= 0.5 and err < 0.01
+    final = (0.04 * FS + 480 - 1024) / FS
+    assert abs(latencies[-1] - final) < 0.0002  # (the drift: 80 ppm of the walk's 2 s)
+    assert all(a.level == "clear" for a in alerts if a.latency_s is None)
+
+
+@pytest.fixture(scope="module")
+def door_room():
+    scene, start, target, plane = _geometry("open")
+    return walk_responses(scene, start, target, 1.3, _monitor().schedule, plane, np.random.default_rng(6), stop_m=0.0)
+
+
+def test_other_headsets_pings_are_never_taken_for_echoes(glass_room, door_room):
+    # Two more headsets in the room running the same call (their own seeds): nothing through the
+    # door, and the glass still warned in time.
+    for room, closed in ((door_room, False), (glass_room, True)):
+        others = other_headsets(room, 2, np.random.default_rng(7))
+        walk = record_walk(room, np.random.default_rng(8), link=AudioLink(0.03), others=others)
+        _, alerts, ends = _run(walk)
+        if closed:
+            at, err, _ = _judged(walk, alerts, ends)
+            assert at is not None and at >= 0.5 and err < 0.01
+        else:
+            assert all(a.level == "clear" for a in alerts)
+
+
+def test_the_callback_is_sounddevices_and_on_alert_hears_each_change(glass_room):
+    sd = pytest.importorskip("sounddevice")  # (install.sh --test installs it)
+    walk = record_walk(glass_room, np.random.default_rng(1), link=AudioLink(0.02))
+    heard = []
+    mon = _monitor(on_alert=heard.append)
+    played = []
+    for i in range(0, len(walk.mic), 256):
+        block = walk.mic[i:i + 256, None].astype(np.float32)  # (frames, channels), as sounddevice gives them
+        out = np.zeros((len(block), 2), np.float32)
+        mon.callback(block, out, len(block), None, sd.CallbackFlags())
+        played.append(out)
+    levels = [a.level for a in heard]
+    assert levels[:2] == ["caution", "stop"] and all(a != b for a, b in zip(levels, levels[1:]))
+    assert mon.alert.level == "stop" and heard[-1] is not None
+    played = np.concatenate(played)
+    assert np.array_equal(played[:, 0], played[:, 1])
+    e = mon.schedule.emission(3)
+    assert np.allclose(played[e:e + len(mon.probe), 0], mon.probe, atol=1e-6)

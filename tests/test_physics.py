@@ -8,6 +8,7 @@ from vrecho.features import echo_response
 from vrecho.materials import WINDOW_GLASS, Material
 from vrecho.scene import Discontinuity, Room, Scene
 from vrecho.sim.scenes import face
+from vrecho.sim.walks import echo_round_trip_s
 from vrecho.signals import FS, probe
 
 # A room large enough that no floor, ceiling or side-wall echo shares the window of the echo
@@ -88,3 +89,24 @@ def test_direct_sound_level_includes_the_loudspeaker_directivity(p, tmp_path):
     pose = face(scene, 0, 1.0)
     ir = device_impulse_response(scene, pose, cache=tmp_path)[0]
     assert np.isclose(np.abs(ir[:30]).max(), device_direct_amplitude(scene, pose), rtol=0.02)
+
+
+def test_furniture_echoes_at_its_distance_and_hides_what_is_behind_it(tmp_path):
+    from vrecho.furniture import Furniture
+
+    scene = _scene("glass")
+    pose = face(scene, 0, 2.5)  # 2.5 m from the window
+    ir = device_impulse_response(scene, pose, cache=tmp_path)[0]
+    # A shelf 1.2 m ahead of the device, between it and the window.
+    ahead = pose.emitter + 1.2 * pose.forward
+    shelf = Furniture("shelf", (float(ahead[0]), float(ahead[1])), (1.6, 0.3, 2.2), yaw_deg=float(
+        np.degrees(np.arctan2(pose.forward[1], pose.forward[0])) + 90.0))
+    scene.furniture = [shelf]
+    blocked = device_impulse_response(scene, pose, cache=tmp_path)[0]
+    for d in (1.2 - 0.15, 2.5):  # the shelf's face (its near side), and the window behind it
+        lag = int(round(echo_round_trip_s(d) * FS))
+        level = lambda h: np.abs(h[lag - 8:lag + 9]).max()  # noqa: E731
+        if d < 2:
+            assert level(blocked) > 4 * level(ir)
+        else:
+            assert level(blocked) < 0.25 * level(ir)

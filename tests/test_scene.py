@@ -119,3 +119,27 @@ def test_negative_depth():
 def test_depth_beyond_the_room():
     with pytest.raises(VrechoError, match="outside the room"):
         face(builtin_scene(), 0, 8.0)
+
+
+def test_furniture_round_trips_and_stays_in_the_room(tmp_path):
+    from vrecho.furniture import Furniture
+
+    scene = builtin_scene()
+    scene.furniture = [Furniture("table", (2.0, 2.5), (1.2, 0.8, 0.04), z0=0.72, yaw_deg=20.0),
+                       Furniture("shelf", (1.0, 1.0), (0.9, 0.35, 1.9))]
+    scene.validate()
+    back = load_scene(scene.save(tmp_path / "s.json"))
+    assert back.furniture == scene.furniture
+    faces = [p for p in back.patches() if p.kind == "furniture"]
+    assert len(faces) == 6 + 5  # the shelf stands on the floor: no underside
+    for f, piece in ((faces[:6], back.furniture[0]), (faces[6:], back.furniture[1])):
+        inside = np.r_[piece.center, piece.z0 + piece.size[2] / 2]
+        for p in f:  # every face's normal points into its box, out of the room's air
+            assert np.dot(p.normal, inside - p.corners.mean(axis=0)) > 0
+    d = scene.to_dict()
+    d["furniture"][1]["center"] = [-1.0, 1.0]
+    with pytest.raises(VrechoError, match=r"furniture\[1\] \(shelf\): not wholly inside the room"):
+        type(scene).from_dict(d)
+    d["furniture"][1]["size"] = [0.9, 0.0, 1.9]
+    with pytest.raises(VrechoError, match=r"furniture\[1\].*size"):
+        type(scene).from_dict(d)

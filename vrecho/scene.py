@@ -22,6 +22,7 @@ import numpy as np
 from .camera import CameraPath
 from .device import MIC_ARRAYS, DevicePose, MicArray
 from .errors import VrechoError, check_field, check_number, check_vector
+from .furniture import Furniture
 from .geometry import distance_to_polygon, point_in_polygon, rectangles_around, segments_cross, signed_area
 from .io import atomic_write_text
 from .materials import BANDS_HZ, MIRROR, WINDOW_GLASS, Material
@@ -41,18 +42,18 @@ class Patch:
     corners : numpy.ndarray [shape=(K, 3)]
         World corners, in metres.
     kind : str
-        ``wall``, ``floor``, ``ceiling``, ``open``, ``glass`` or ``mirror``.
+        ``wall``, ``floor``, ``ceiling``, ``open``, ``glass``, ``mirror`` or ``furniture``.
     material : Material
     surface : int
-        Wall index; -1 for the floor, -2 for the ceiling.
+        Wall index; -1 for the floor, -2 for the ceiling, -3 - i for furniture ``i``.
     discontinuity : int or None
         Index of the discontinuity the patch is, None for bare boundary.
     """
 
     corners: np.ndarray  # (K, 3)
-    kind: str  # wall | floor | ceiling | open | glass | mirror
+    kind: str  # wall | floor | ceiling | open | glass | mirror | furniture
     material: Material
-    surface: int  # wall index; -1 floor, -2 ceiling
+    surface: int  # wall index; -1 floor, -2 ceiling, -3 - i furniture i
     discontinuity: int | None = None
 
     @property
@@ -377,6 +378,8 @@ class Scene:
         p + (1 - p) cos(angle off the forward axis); 1 is omnidirectional, 0.5 a cardioid. A
         phone's speaker in its body radiates forward: 0.7 (the default) is about 3 dB down at 90
         degrees, 8 dB behind.
+    furniture : list of Furniture
+        Boxes in the room (tables, sofas, shelves, door leaves); none by default.
 
     Raises
     ------
@@ -392,6 +395,7 @@ class Scene:
     camera_path: CameraPath | None = None
     mic_array: MicArray = MIC_ARRAYS["phone"]
     emitter_p: float = 0.7
+    furniture: list[Furniture] = field(default_factory=list)
 
     def __post_init__(self):
         self.validate()
@@ -433,6 +437,9 @@ class Scene:
         for i, s in enumerate(self.sources):
             if not room.contains(np.asarray(s.position)[None])[0]:
                 raise VrechoError(f"sources[{i}].position: {np.round(s.position, 3).tolist()} is outside the room")
+        for i, f in enumerate(self.furniture):
+            if not point_in_polygon(f.footprint(), room.footprint).all() or f.top_m > room.height_m:
+                raise VrechoError(f"furniture[{i}] ({f.name}): not wholly inside the room")
         if self.camera_path is not None:
             outside = ~room.contains(self.camera_path.positions)
             if outside.any():
@@ -520,7 +527,9 @@ class Scene:
         -------
         list of Patch
             Per wall, its pieces cut around each discontinuity, then the discontinuities
-            themselves; then floor and ceiling. Every patch's normal points out.
+            themselves; then floor and ceiling; then each piece of furniture's faces (kind
+            "furniture", ``surface`` -3 - its index). Every patch's normal points out of the
+            room's air.
         """
         room = self.room
         out: list[Patch] = []
@@ -534,6 +543,8 @@ class Scene:
         fp = room.footprint
         out.append(Patch(np.c_[fp[::-1], np.zeros(len(fp))], "floor", room.floor, -1))
         out.append(Patch(np.c_[fp, np.full(len(fp), room.height_m)], "ceiling", room.ceiling, -2))
+        for i, f in enumerate(self.furniture):
+            out.extend(Patch(face, "furniture", f.material, -3 - i) for face in f.faces())
         return out
 
     # -- JSON -----------------------------------------------------------------------------------
@@ -549,7 +560,8 @@ class Scene:
                 "discontinuities": [d.to_dict() for d in self.discontinuities],
                 "poses": [p.to_dict() for p in self.poses], "sources": [s.to_dict() for s in self.sources],
                 "camera_path": None if self.camera_path is None else self.camera_path.to_dict(),
-                "mic_array": self.mic_array.name, "emitter_p": self.emitter_p}
+                "mic_array": self.mic_array.name, "emitter_p": self.emitter_p,
+                "furniture": [f.to_dict() for f in self.furniture]}
 
     def to_json(self) -> str:
         """The scene as JSON text, as :meth:`save` writes it.
@@ -612,7 +624,8 @@ class Scene:
                    [DevicePose.from_dict(x, f"poses[{i}]") for i, x in enumerate(items("poses"))],
                    [SoundSource.from_dict(x, f"sources[{i}]") for i, x in enumerate(items("sources"))],
                    None if cp is None else CameraPath.from_dict(cp), MIC_ARRAYS[mic],
-                   check_number(d.get("emitter_p", 0.7), "scene.emitter_p", lo=0.0, hi=1.0))
+                   check_number(d.get("emitter_p", 0.7), "scene.emitter_p", lo=0.0, hi=1.0),
+                   [Furniture.from_dict(x, f"furniture[{i}]") for i, x in enumerate(items("furniture"))])
 
 
 def load_scene(path: str | Path) -> Scene:

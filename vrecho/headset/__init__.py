@@ -1,14 +1,17 @@
 """The headset call: warn before the wearer walks into glass, a mirror or a wall.
 
 - :class:`BoundaryMonitor` (boundary.py): the echo ranging of a full-duplex audio callback, its
-  alerts and their hysteresis; the surfaces it follows are :class:`~.tracks.Track` (tracks.py).
+  alerts and their hysteresis; the surfaces it follows are :class:`~.tracks.Track` (tracks.py);
+  its probe, when it plays it, the microphone's envelope and the echoes in it are ranging.py's,
+  the lock on its own round trip roundtrip.py's.
 - :func:`look` (view.py): what the headset's camera says of a surface an echo found (wall, glass
   or mirror), shown to the monitor with :meth:`BoundaryMonitor.see`.
 
 Nothing here imports torch until a camera frame is classified: the audio path starts fast.
 """
 
-from .boundary import Alert, BoundaryMonitor, ranging_probe
+from .boundary import Alert, BoundaryMonitor
+from .ranging import ProbeSchedule, ranging_probe
 from .view import SurfaceView, load_model, look, look_all, pane_crop
 
-__all__ = ["Alert", "BoundaryMonitor", "SurfaceView", "load_model", "look", "look_all", "pane_crop", "ranging_probe"]
+__all__ = ["Alert", "BoundaryMonitor", "ProbeSchedule", "SurfaceView", "load_model", "look", "look_all", "pane_crop", "ranging_probe"]

@@ -1,23 +1,28 @@
 """The headset call: warn before the wearer walks into glass, a mirror or a wall.
 
-:class:`BoundaryMonitor` has the shape of a full-duplex audio callback (sounddevice's
-``Stream(callback=...)``): each call gets the microphone's block and fills the loudspeaker's
-block of the same length, on the same sample clock. It plays a ranging probe (:func:`ranging_probe`,
-a 5 ms linear chirp from 4 to 20 kHz, Tukey-windowed, every 40 ms: a faint tick), and for each
-pulse:
+:class:`BoundaryMonitor` has the shape of a full-duplex audio callback: each call gets the
+microphone's block and fills the loudspeaker's block of the same length (:meth:`~BoundaryMonitor.callback`
+is sounddevice's ``Stream(callback=...)`` itself). It plays a ranging probe
+(:func:`~.ranging.ranging_probe`, a 5 ms linear chirp from 4 to 20 kHz, Tukey-windowed, every 40
+ms plus a dither of up to 5 ms drawn from its own seed: a faint tick), and:
 
-1. **Ranging.** Matched filter of the microphone signal with the probe (the envelope of the
-   cross-correlation), the device's own direct sound as the time reference (so unknown audio
-   latency cancels), echo peaks above the noise floor (``threshold`` times the envelope's
-   median) and the direct sound's sidelobes (when the direct sound is clipped, above the
-   clipped probe's own distortion, which spreads over one probe's length after it), each timed
-   to a fraction of a sample by parabolic interpolation. A surface straight ahead at ``d``
-   returns the echo path ``L = sqrt((2 d)^2 + s^2)`` (``s``: emitter to microphone): ``d`` follows.
-2. **Tracking.** Echo distances are chained over pulses into tracks (nearest to each track's
-   prediction, within 12 cm); an alpha-beta filter, started from its first two echoes' speed
-   (a fast walk's echo moves 8 cm a pulse), gives each track's distance and closing speed (it
-   follows a wearer who starts or stops within a few pulses), time to contact is distance /
-   closing speed.
+0. **Its own round trip.** A real stream hands the loudspeaker's sound back 0 to 300 ms later
+   (more on ordinary desktop and phone audio), unknown, and changes it by a block after an
+   underrun. The monitor searches the microphone's stream for the delay at which its own
+   dithered pulses arrive (:mod:`.roundtrip`), reports it (``alert.latency_s``), follows the
+   clocks' drift and the steps, and while it is not locked says "unlocked" and raises no alarm
+   ("no_direct_sound" after a second: a muted loudspeaker). Another headset's pings, dithered by
+   its own seed, land somewhere else every pulse: no track follows them.
+1. **Ranging.** The microphone's stream is correlated with the probe as it arrives (the
+   envelope, :class:`~.ranging.Envelope`); each pulse's own direct sound is its time reference;
+   echo peaks above the noise floor and the direct sound's sidelobes are timed to a fraction of a
+   sample (:class:`~.ranging.EchoFinder`). A surface straight ahead at ``d`` returns the echo path
+   ``L = sqrt((2 d)^2 + s^2)`` (``s``: loudspeaker to microphone): ``d`` follows.
+2. **Tracking.** Echo distances are chained over pulses into tracks (the closest pairs of echo
+   and prediction first, within each track's gate: 12 cm while young, then five times its rms
+   residual, at least 4 cm, so a stray peak seldom joins it); an alpha-beta filter, started from
+   its first two echoes' speed (a fast walk's echo moves 8 cm a pulse), gives each track's
+   distance and closing speed.
 3. **Alerts with hysteresis.** Only surfaces the wearer moves toward count (``approach_m``
    nearer within 0.8 s, in the last second) and will not pass by: a point at lateral offset
    ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, so a quadratic fit over the last 0.3 to 0.6 s
@@ -26,23 +31,21 @@ pulse:
    door, heard by way of the ceiling, or a wall beside it by way of a side wall, nears too but
    passes by, and a track whose fit is poor waits). This is what tells the wall ahead from the
    floor, the ceiling and walls alongside, which one microphone cannot tell by direction.
-   *caution* when time to contact is under ``caution_ttc_s`` or distance under ``caution_m``,
-   *stop* under ``stop_m``; an alert ends only ``hysteresis_m`` beyond its threshold (or when
-   the surface stops approaching for a second).
+   The echo is as old as the round trip: the level reckons where the wearer may be by now (the
+   pulse may have left as soon as it was written). *caution* when time to contact is under
+   ``caution_ttc_s`` or distance under ``caution_m``, *stop* under ``stop_m``; an alert ends only
+   ``hysteresis_m`` beyond its threshold (or when the surface stops approaching for a second).
 
 The alert is the gravest any surface in the way calls for (the soonest to contact among equals),
-judged again whenever something it rests on changes (a pulse's window completes, a surface's
-approach grows a second old): while a surface in the way, or one not yet known to pass by, is
-near a threshold, the block in which its echo of the pulse still arriving is predicted to end
-(give or take 1.5 ms) also analyses that pulse (an undecided surface is asked again with that
-echo), so an echo that crosses the threshold raises the alert in the block in which that echo
-ends.
+judged again whenever something it rests on changes: a pulse's window completes, a surface's
+approach grows a second old, the wearer walks on to the next threshold, or the echo of the pulse
+still arriving of a surface near a threshold has come in (that pulse is then analysed in the block
+its echo ends, an undecided surface asked again with it).
 
 Robustness: clipped samples are flagged (the timing survives clipping, and the clipped direct
-sound's distortion is kept out, see 1.); runs of exact zeros (dropouts) and non-finite samples
-are flagged, and a pulse's window ends where they begin (the echoes heard wholly before them
-count; none if they reach the direct sound); any block size, changing from call to call; 44.1
-or 48 kHz.
+sound's distortion is kept out); runs of exact zeros (dropouts) and non-finite samples are
+flagged, and a pulse's window ends where they begin (the echoes heard wholly before them count;
+none if they reach the direct sound); any block size, changing from call to call; 44.1 or 48 kHz.
 
 ``surface``: "opening" when the wearer moves and nothing ahead echoes; for an echoing surface
 ahead, "closed" until the headset's camera has been shown it, then what the camera makes of it
@@ -59,52 +62,16 @@ import bisect
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import fft
-from scipy.ndimage import maximum_filter1d
-from scipy.signal import chirp
-from scipy.signal.windows import tukey
 
 from ..errors import VrechoError
-from ..signals import SPEED_OF_SOUND, analytic_envelope, analytic_filter, parabolic_peaks
+from ..signals import SPEED_OF_SOUND
+from .ranging import GUARD, EchoFinder, Envelope, ProbeSchedule, clipped, ranging_probe, zero_runs
+from .roundtrip import RoundTrip
 from .tracks import Track
 from .view import look_all
 
 
-def ranging_probe(fs: int, *, duration_s: float = 0.005, f0: float = 4000.0, f1: float = 20000.0) -> np.ndarray:
-    """The ranging probe: a linear chirp from ``f0`` to ``f1`` Hz over ``duration_s``, Tukey
-    window (25 %), peak 0.5.
-
-    Parameters
-    ----------
-    fs : int
-        Sample rate in Hz.
-    duration_s : float
-        The chirp's length in seconds (default 5 ms).
-    f0, f1 : float
-        The chirp's start and end frequencies in Hz (default 4 and 20 kHz).
-
-    Returns
-    -------
-    numpy.ndarray [shape=(round(duration_s * fs),), dtype=float64]
-
-    Raises
-    ------
-    VrechoError
-        When ``f1`` is not below the Nyquist frequency ``fs / 2``.
-
-    Examples
-    --------
-    >>> from vrecho.headset import ranging_probe
-    >>> ranging_probe(48000).shape
-    (240,)
-    """
-    if f1 >= fs / 2:
-        raise VrechoError(f"probe: {f1} Hz needs a sample rate above {2 * f1:.0f} Hz, got {fs}")
-    t = np.arange(int(round(duration_s * fs))) / fs
-    return (0.5 * chirp(t, f0, duration_s, f1) * tukey(len(t), 0.25)).astype(np.float64)
-
-
-@dataclass
+@dataclass(frozen=True)
 class Alert:
     """What the monitor says after a block.
 
@@ -113,8 +80,10 @@ class Alert:
     level : str
         "clear", "caution" or "stop".
     distance_m : float or None
-        The distance in metres of the surface the alert rests on: of those in the wearer's way,
-        the gravest, then the soonest to contact (None if none).
+        The distance in metres of the surface the alert rests on (of those in the wearer's way,
+        the gravest, then the soonest to contact; None if none), as the pulse emitted at
+        ``pulse_time_s`` measured it. The level reckons with the wearer's walk since: the
+        pulse may have left as soon as it was written, a round trip before its echo came back.
     surface : str or None
         "wall", "glass", "mirror" (what the camera made of the surface,
         :meth:`BoundaryMonitor.see`), "closed" (not yet seen), "opening" or None (see the
@@ -124,13 +93,19 @@ class Alert:
     closing_speed_mps : float or None
         That surface's closing speed in m/s (positive: nearing).
     time_to_contact_s : float or None
-        That surface's time to contact in seconds (None when it closes at 5 cm/s or less).
+        That surface's time to contact in seconds, from now (None when it closes at 5 cm/s or
+        less).
     flags : tuple of str
-        What was wrong with the input so far in this block ("nan", "dropout", "clipped",
-        "no_echo").
+        What was wrong with the input so far in this block ("nan", "dropout", "clipped"), and
+        the monitor's state: "unlocked" (its own direct sound not found yet, or lost after the
+        round trip changed: no alarm then), "no_direct_sound" (unlocked for over a second: the
+        loudspeaker muted, the microphone off?), "no_echo".
     pulse_time_s : float or None
         When (seconds, on the stream's clock, from the first sample) the pulse that measured
-        ``distance_m`` was emitted.
+        ``distance_m`` was written to the loudspeaker.
+    latency_s : float or None
+        The round trip the monitor is locked on, loudspeaker write to microphone read, in
+        seconds (None while unlocked).
     """
 
     level: str = "clear"
@@ -141,25 +116,35 @@ class Alert:
     time_to_contact_s: float | None = None
     flags: tuple[str, ...] = ()
     pulse_time_s: float | None = None
+    latency_s: float | None = None
 
 
 class BoundaryMonitor:
     """Echo ranging for a headset: call it with each microphone block and the loudspeaker block
-    to fill (see the module's notes).
+    to fill, or hand :meth:`callback` to ``sounddevice.Stream`` (see the module's notes).
 
     Parameters
     ----------
     fs : {44100, 48000}
         Sample rate of both streams in Hz (default 48000).
     period_s : float
-        Time between probe pulses in seconds (default 0.04; sets the longest unambiguous range,
-        c * period / 2). It must exceed the round trip to ``max_range_m`` plus 6 ms, and be at
-        most 0.5 s.
+        Time between probe pulses in seconds, before the dither (default 0.04; sets the longest
+        unambiguous range, c * period / 2). It must exceed the round trip to ``max_range_m``,
+        the probe and the dither, and be at most 0.5 s.
+    dither_s : float
+        Each pulse leaves up to this much after its period's start, in seconds, drawn from
+        ``seed`` (default 0.005): another headset's pings, dithered by its own seed, never line
+        up with this one's echoes.
+    seed : int, optional
+        The dither's seed (default: a fresh random one; give one only to repeat a run).
+    max_latency_s : float
+        The longest round trip, speaker write to microphone read, searched for in seconds
+        (default 0.35).
     max_range_m, min_range_m : float
         Echoes are looked for between these distances in metres (default 4 and 0.12).
     mic_offset_m : float
-        Distance in metres from the loudspeaker to the microphone (PROTOCOL's device: 0.07 m,
-        the default).
+        Distance in metres from the loudspeaker to the microphone, as the headset's maker gives
+        it (PROTOCOL's device: 0.07 m, the default), across the wearer's forward axis.
     caution_ttc_s, caution_m, stop_m, hysteresis_m : float
         Alert thresholds, in seconds and metres (default 2 s, 1 m, 0.5 m, 0.1 m; see the
         module's notes); 0 < ``stop_m`` < ``caution_m``, ``caution_ttc_s`` > 0,
@@ -174,11 +159,16 @@ class BoundaryMonitor:
         An echo must rise this many times above the envelope's median (4.5, 13 dB: a mirror
         2.5 m ahead is heard through pink noise 20 dB below the direct sound; the tracks keep
         single noise peaks from mattering).
+    on_alert : callable, optional
+        Called with the new :class:`Alert` whenever the level changes, from the audio thread
+        (keep it short: put the alert on a queue).
 
     Attributes
     ----------
     alert : Alert
         The alert returned for the last block.
+    schedule : ProbeSchedule
+        When the probe is played.
 
     Raises
     ------
@@ -189,80 +179,58 @@ class BoundaryMonitor:
     --------
     >>> import numpy as np
     >>> from vrecho.headset import BoundaryMonitor
-    >>> monitor = BoundaryMonitor(48000)
+    >>> monitor = BoundaryMonitor(48000, seed=0)
     >>> speaker = np.zeros(480)  # a 10 ms block
     >>> mic = 1e-3 * np.random.default_rng(0).standard_normal(480)
-    >>> alert = monitor(mic, speaker)  # speaker now holds the probe's first 5 ms
-    >>> alert.level, alert.distance_m
-    ('clear', None)
-    >>> round(float(np.abs(speaker).max()), 3)
-    0.5
+    >>> alert = monitor(mic, speaker)  # speaker now holds what is due of the probe
+    >>> alert.level, alert.distance_m, alert.flags
+    ('clear', None, ('unlocked',))
     """
 
-    def __init__(self, fs: int = 48000, *, period_s: float = 0.04, max_range_m: float = 4.0, min_range_m: float = 0.12,
+    def __init__(self, fs: int = 48000, *, period_s: float = 0.04, dither_s: float = 0.005, seed: int | None = None,
+                 max_latency_s: float = 0.35, max_range_m: float = 4.0, min_range_m: float = 0.12,
                  mic_offset_m: float = 0.07, caution_ttc_s: float = 2.0, caution_m: float = 1.0, stop_m: float = 0.5,
-                 hysteresis_m: float = 0.1, approach_m: float = 0.12, miss_m: float = 0.4, threshold: float = 4.5):
+                 hysteresis_m: float = 0.1, approach_m: float = 0.12, miss_m: float = 0.4, threshold: float = 4.5,
+                 on_alert=None):
         if fs not in (44100, 48000):
             raise VrechoError(f"fs: expected 44100 or 48000 Hz, got {fs!r}")
-        if not 2 * max_range_m / SPEED_OF_SOUND + 0.006 < period_s <= 0.5:
-            raise VrechoError(f"period_s: must exceed the round trip to max_range_m plus the probe "
-                              f"({2 * max_range_m / SPEED_OF_SOUND + 0.006:.3f} s) and be at most 0.5 s, got {period_s}")
+        probe = ranging_probe(fs)
+        least = 2 * max_range_m / SPEED_OF_SOUND + (len(probe) + 2 * GUARD) / fs + dither_s + 0.001
+        if not least < period_s <= 0.5 or dither_s < 0:
+            raise VrechoError(f"period_s: must exceed the round trip to max_range_m, the probe and the dither "
+                              f"({least:.3f} s) and be at most 0.5 s, got {period_s}")
         if not 0 < stop_m < caution_m and caution_ttc_s > 0 and hysteresis_m >= 0:
             raise VrechoError("thresholds: need 0 < stop_m < caution_m, caution_ttc_s > 0, hysteresis_m >= 0")
+        if not 0 <= max_latency_s <= 2.0:
+            raise VrechoError(f"max_latency_s: expected 0 to 2 s, got {max_latency_s}")
         self.fs = fs
-        self.probe = ranging_probe(fs)
-        self.period = int(round(period_s * fs))
+        self.probe = probe
+        self.schedule = ProbeSchedule(fs, probe, period_s=period_s, dither_s=dither_s, seed=seed)
+        self.period = self.schedule.period
         self.max_range_m, self.min_range_m, self.mic_offset_m = max_range_m, min_range_m, mic_offset_m
         self.caution_ttc_s, self.caution_m, self.stop_m = caution_ttc_s, caution_m, stop_m
         self.hysteresis_m, self.approach_m, self.threshold = hysteresis_m, approach_m, threshold
         self.miss_m = miss_m
-        # The window of one pulse: the direct sound (with up to 10 ms of audio latency) and echoes
-        # out to max_range_m, plus the probe's length.
-        self.latency_max = int(0.010 * fs)
-        self.window = min(self.period, self.latency_max + int((2 * max_range_m / SPEED_OF_SOUND) * fs) + 2 * len(self.probe))
-        self._buf = np.zeros(self.period * 3)
-        self._valid = np.zeros(self.period * 3, bool)
+        self.on_alert = on_alert
+        # A pulse's window: from its direct sound to the echoes from max_range_m, and the probe.
+        self.window = int((2 * max_range_m / SPEED_OF_SOUND) * fs) + len(probe) + 2
+        self._lock = RoundTrip(self.schedule, max_latency_s, int(0.002 * fs))
+        size = 1 << int(np.ceil(np.log2(self._lock.max + 4 * (self.period + self.schedule.dither) + self.window)))
+        self._env = Envelope(probe, size)
         self._now = 0  # samples received so far (= samples played: one clock)
         self._judged = 0  # samples received at the last judgement
+        self._searched = -self.period  # samples received at the last search for the round trip
+        self._next = 0  # the next pulse to commit
         self._tracks: list[Track] = []
-        self._pulse_done = -1  # last pulse committed to the tracks
-        self._direct_delay: float | None = None  # samples from emission to the direct peak (latency + s / c)
-        self._alert = self._verdict = Alert()  # the alert returned; the last judgement behind it
+        self._alert = self._verdict = Alert(flags=("unlocked",))  # the alert returned; the last judgement behind it
         self._verdict_track: Track | None = None  # the surface it rests on
         self._oldest_approach = np.inf  # the earliest approached_at among the surfaces judged
+        self._judge_at = np.inf  # when the wearer, walking on, reaches the next threshold (seconds): judge again then
+        self._ends_for, self._ends = -1, []  # the pulse whose echoes' lags _echo_ends gave, and those lags
         self._still: list[float] = []  # distances of the surfaces that stay put, at the last commit
         self._level = "clear"
-        self._kernels: dict[int, np.ndarray] = {}
-        self._clipped_floors: dict[int, np.ndarray] = {}
-        self._fft_sizes: dict[int, int] = {}
-        lag = np.arange(self.window + len(self.probe), dtype=float)  # the direct sound's sidelobes by lag
-        self._sidelobe = 10 ** (-(32 + 6 * np.log2(np.maximum(lag, 1) / (0.5 * len(self.probe)) + 1)) / 20)
-
-    def _kernel(self, n: int) -> np.ndarray:
-        """The probe's analytic matched filter for an FFT of ``n`` (:func:`~vrecho.signals.analytic_filter`),
-        cached per size: a pulse still arriving is filtered with a shorter FFT."""
-        if n not in self._kernels:  # single precision: a sample's thousandth is ample
-            self._kernels[n] = analytic_filter(self.probe, n).astype(np.complex64)
-        return self._kernels[n]
-
-    def _clipped_sidelobe(self, fraction: float) -> np.ndarray:
-        """The floor beside a clipped direct sound: the matched filter's response to the probe
-        clipped so that ``fraction`` of its samples sit at the rail (its distortion spreads over
-        one probe's length after the peak, up to some 30 dB below it), 6 dB above that, and never
-        below the clean sidelobes. Cached in steps of 5 %."""
-        step = max(1, int(round(fraction * 20)))
-        if step not in self._clipped_floors:
-            peak = np.abs(self.probe).max()  # (clipped wholly: its signs)
-            level = max(np.quantile(np.abs(self.probe), 1 - step / 20), 1e-3 * peak)
-            m = len(self.probe)
-            n = 4 * m
-            x = np.zeros(n - m)
-            x[:m] = np.clip(self.probe, -level, level)
-            env = analytic_envelope(x, analytic_filter(self.probe, n), n)[:n - m]  # past n - m: negative lags
-            profile = np.zeros(max(len(self._sidelobe), n - m))
-            profile[:len(env)] = maximum_filter1d(env / env[0], 9)  # a few samples' slack in timing
-            self._clipped_floors[step] = np.maximum(self._sidelobe, 2.0 * profile[:len(self._sidelobe)])
-        return self._clipped_floors[step]
+        self._echoes = EchoFinder(probe, fs, self.window, threshold=threshold, min_range_m=min_range_m,
+                                  max_range_m=max_range_m, mic_offset_m=mic_offset_m)
 
     # -- The callback ------------------------------------------------------------------------------
     def __call__(self, mic, speaker=None) -> Alert:
@@ -279,6 +247,31 @@ class BoundaryMonitor:
             As :meth:`process` returns it.
         """
         return self.process(mic, speaker)
+
+    def callback(self, indata, outdata, frames: int, time, status) -> None:
+        """sounddevice's full-duplex callback: ``sounddevice.Stream(callback=monitor.callback)``.
+
+        Fills every output channel with the probe, reads input channel 0, and keeps the alert
+        at :attr:`alert` (``on_alert`` is called when its level changes). A status that reports
+        lost samples (an underrun or overrun) tells the lock on the round trip that it may have
+        moved.
+
+        Parameters
+        ----------
+        indata : numpy.ndarray [shape=(frames, channels)]
+            The microphone's block.
+        outdata : numpy.ndarray [shape=(frames, channels)]
+            The loudspeaker's block, filled in place.
+        frames : int
+            The block's length.
+        time : object
+            The stream's timestamps (unused: the monitor finds its round trip itself).
+        status : sounddevice.CallbackFlags
+            True when the stream lost or invented samples.
+        """
+        if status:
+            self._lock.suspect()
+        self.process(indata, outdata)
 
     def process(self, mic, speaker=None) -> Alert:
         """Read one microphone block, fill the loudspeaker block, and return the alert.
@@ -306,7 +299,7 @@ class BoundaryMonitor:
         x = np.asarray(mic)
         if x.ndim == 2:
             x = x[:, 0]
-        if x.ndim != 1 or not np.issubdtype(x.dtype, np.number):
+        if x.ndim != 1 or x.dtype.kind not in "fiu":
             raise VrechoError(f"mic: expected a numeric (frames,) or (frames, channels) block, got shape {x.shape}")
         n = len(x)
         if speaker is not None:
@@ -315,29 +308,50 @@ class BoundaryMonitor:
                 raise VrechoError(f"speaker: expected {n} frames like the microphone block, got {len(out)}")
             block = self.speaker_block(n)
             out[...] = block[:, None] if out.ndim == 2 else block
-        x = x.astype(np.float64, copy=True)
+        x = x.astype(np.float32, copy=True)
         flags = []
-        finite = np.isfinite(x)
-        if not finite.all():
+        valid = _TRUE[:n] if n <= len(_TRUE) else np.ones(n, bool)
+        mag = np.abs(x)
+        top = float(mag.max()) if n else 0.0
+        if not np.isfinite(top):  # (the usual block costs this one reduction and the two counts below)
+            finite = np.isfinite(x)
             flags.append("nan")
             x[~finite] = 0.0
-        valid = finite.copy()
-        zeros = _zero_runs(x, 32) & finite
-        if zeros.any():
-            flags.append("dropout")
-            valid &= ~zeros
-        if _clipped(x):
+            valid = finite
+            mag = np.abs(x)
+            top = float(mag.max())
+        if np.count_nonzero(x) < n:
+            zeros = zero_runs(x, 32) & valid
+            if zeros.any():
+                flags.append("dropout")
+                valid = valid & ~zeros
+        if top > 0 and np.count_nonzero(mag >= top * (1 - 1e-6)) >= 3 and clipped(x):
             flags.append("clipped")
-        self._push(x, valid)
-        self._update()
-        v, tr = self._verdict, self._verdict_track  # a new Alert per block: one already returned keeps its flags
+            self._clipped_at = self._now + n
+        size = self._env.size // 2
+        for lo in range(0, n, size):  # a block longer than half the memory: in pieces, in order
+            self._env.push(x[lo:lo + size], valid[lo:lo + size])
+            self._now += len(x[lo:lo + size])
+            self._update()
+        v, tr = self._verdict, self._verdict_track
         surface = tr.surface if tr is not None else v.surface  # the camera may have seen it since
-        self._alert = Alert(v.level, v.distance_m, surface, v.confidence, v.closing_speed_mps, v.time_to_contact_s,
-                            tuple(dict.fromkeys(v.flags + tuple(flags))), v.pulse_time_s)
+        latency = self.latency_s
+        last = self._alert
+        if flags or v is not self._alerted or surface != last.surface or latency != last.latency_s:
+            self._alert = Alert(v.level, v.distance_m, surface, v.confidence, v.closing_speed_mps, v.time_to_contact_s,
+                                tuple(dict.fromkeys(v.flags + tuple(flags))), v.pulse_time_s, latency)
+            self._alerted = v if not flags else None
+        if self.on_alert is not None and self._alert.level != self._announced:
+            self._announced = self._alert.level
+            self.on_alert(self._alert)
         return self._alert
 
+    _announced = "clear"
+    _clipped_at = -(1 << 40)  # the sample at which a block last came clipped
+    _alerted = None  # the verdict the last alert told, when that alert had no flags of its own
+
     def speaker_block(self, n: int) -> np.ndarray:
-        """The loudspeaker's next ``n`` samples (the probe at the start of every period).
+        """The loudspeaker's next ``n`` samples (:attr:`schedule`'s pulses).
 
         For the block that starts at the monitor's current sample: call it before
         :meth:`process` on that block (it does not advance the monitor's clock).
@@ -351,21 +365,25 @@ class BoundaryMonitor:
         -------
         numpy.ndarray [shape=(n,), dtype=float64]
         """
-        out = np.zeros(n)
-        start = self._now
-        k = start // self.period
-        while k * self.period < start + n:
-            e = k * self.period
-            lo, hi = max(e, start), min(e + len(self.probe), start + n)
-            if hi > lo:
-                out[lo - start:hi - start] = self.probe[lo - e:hi - e]
-            k += 1
-        return out
+        return self.schedule.block(self._now, n)
 
     @property
     def alert(self) -> Alert:
         """The alert returned for the last block (a clear one before the first)."""
         return self._alert
+
+    @property
+    def latency_s(self) -> float | None:
+        """The round trip the monitor is locked on, speaker write to microphone read, in seconds
+        (the direct sound's flight over ``mic_offset_m`` taken out), or None while it is not."""
+        d = self._lock.delay
+        return None if d is None else max(d / self.fs - self.mic_offset_m / SPEED_OF_SOUND, 0.0)
+
+    def _stale_s(self, t_pulse: float) -> float:
+        """Seconds from a pulse's emission to now, as the monitor must reckon them: the sooner
+        of its two ends, so the pulse left when it was written (the round trip wholly on the
+        microphone's side), the wearer having moved on since."""
+        return max(self._now / self.fs - t_pulse, 0.0)
 
     def see(self, image, depth, intrinsics, *, model=None) -> str | None:
         """Show the monitor the headset camera's latest frame: what the surfaces ahead are.
@@ -400,10 +418,13 @@ class BoundaryMonitor:
         VrechoError
             For a bad frame or intrinsics (:func:`vrecho.headset.view.look`).
         """
-        t = self._now / self.fs
+        # The frame shows the wearer now; the echoes left half a round trip after they were
+        # written (the round trip's two sides taken as equal).
+        t = self._now / self.fs - 0.5 * (self.latency_s or 0.0)
+        fresh = t - (self.latency_s or 0.0) * 0.5
         verdict = self._verdict_track
         near = sorted((tr for tr in list(self._tracks)  # the audio thread may change the list meanwhile
-                       if tr is not verdict and tr.ahead is not False and t - tr.times[-1] < 0.2
+                       if tr is not verdict and tr.ahead is not False and fresh - tr.times[-1] < 0.2
                        and (tr.speed or 0.0) < -0.2), key=lambda tr: tr.predict(t))
         asked = [(tr, tr.predict(t)) for tr in ([verdict] if verdict is not None else []) + near[:3 - (verdict is not None)]]
         asked = [(tr, d) for tr, d in asked if d > self.min_range_m]
@@ -413,154 +434,139 @@ class BoundaryMonitor:
         return verdict.surface if verdict is not None else None
 
     # -- Internals ---------------------------------------------------------------------------------
-    def _push(self, x: np.ndarray, valid: np.ndarray) -> None:
-        size = len(self._buf)
-        for lo in range(0, len(x), size):  # a block longer than the buffer: keep what fits, in order
-            chunk, ok = x[lo:lo + size], valid[lo:lo + size]
-            at = self._now % size
-            first = min(len(chunk), size - at)  # up to the ring's end, then from its start
-            self._buf[at:at + first], self._valid[at:at + first] = chunk[:first], ok[:first]
-            self._buf[:len(chunk) - first], self._valid[:len(chunk) - first] = chunk[first:], ok[first:]
-            self._now += len(chunk)
-            if lo + size < len(x):
-                self._update()
-
-    def _samples(self, start: int, stop: int) -> tuple[np.ndarray, int]:
-        """The samples from ``start`` to ``stop`` and how many of them come before the first
-        damaged one (a dropout's or a NaN's)."""
-        size = len(self._buf)
-        a, b = start % size, (start % size) + (stop - start)
-        idx = slice(a, b) if b <= size else np.arange(start, stop) % size  # across the ring's end
-        valid = self._valid[idx]
-        return self._buf[idx], len(valid) if valid.all() else int(np.argmin(valid))
-
     def _update(self) -> None:
-        """Commit every pulse whose window is complete, then judge the current pulse from what has
-        arrived of it."""
-        last = (self._now - self.window) // self.period  # newest pulse with a complete window
-        oldest = max(self._pulse_done + 1, (self._now - len(self._buf) + self.period) // self.period, 0)
+        """While searching, look for the round trip (once a period); once locked, commit every
+        pulse whose window is complete, then judge the current pulse from what has arrived of it."""
+        env, lock = self._env, self._lock
+        if lock.delay is None:
+            if self._now - self._searched < self.period // 2:
+                return
+            self._searched = self._now
+            env.compute(env.ready())
+            if not lock.search(env):
+                searching = (self._now - lock.searching_since) / self.fs
+                flags = ("unlocked", "no_direct_sound") if searching > 1.0 else ("unlocked",)
+                if self._verdict.flags != flags or self._verdict.level != "clear":
+                    self._level, self._verdict_track = "clear", None
+                    self._verdict = Alert(flags=flags)
+                return
+            env.searching = False
+            held = env.n - env.size + 2 * GUARD + lock.guard - int(lock.delay)  # pulses whose direct sound is still held
+            self._next = max(self._next, self.schedule.first_at_or_after(max(held, 0)))
+        sch = self.schedule
         changed = False
-        for k in range(oldest, last + 1):
-            echoes = self._detect(k, k * self.period + self.window)
-            if echoes is not None:
-                self._commit(k, echoes)
-                changed = True
-            self._pulse_done = k
-        current = self._now // self.period
+        while lock.delay is not None:
+            k = self._next
+            due = lock.due(k)
+            end = int(due) + self.window
+            if env.ready() < end:
+                break
+            env.skip(int(due) - lock.guard - 4)  # locked: only the pulses' windows are looked at
+            env.compute(end)
+            ref = lock.follow(env, k, self._now)
+            if lock.delay is None:  # lost: no alarm, and search again from the next block
+                self._searched = -self.period
+                env.searching = True
+                self._level, self._verdict_track, self._verdict = "clear", None, Alert(flags=("unlocked",))
+                return
+            if ref is not None:
+                echoes = self._echoes.find(self._env, ref, end, clipped=self._clipped_at > ref - 8192)
+                if echoes is not None:
+                    self._commit(sch.emission(k) / self.fs, echoes)
+                    changed = True
+                    self._ends_for = -1
+            self._next = k + 1
+        k = self._next
         partial = None
-        e = current * self.period
-        if current > self._pulse_done and self._now - e > len(self.probe):
+        due = lock.due(k)
+        ready = env.ready()
+        if ready > due + len(self.probe):
             # A surface in the way near a threshold: its echo of this pulse may cross it. Looked
             # for in the block in which that echo ends (as predicted, give or take 1.5 ms, a
             # quarter metre), not in every block.
             margin = 0.0015 * self.fs
-            if any(self._judged < e + end + margin and self._now >= e + end - margin
-                   for end in self._echo_ends(e / self.fs)):
-                partial = self._detect(current, self._now)
-        # The judgement changes only with the tracks, a pulse still arriving, or when a surface's
-        # approach grows a second old: otherwise the last one stands.
-        if changed or partial or self._now / self.fs - self._oldest_approach > 1.0:
-            self._judge(partial, current)
+            judged = self._judged - len(self.probe) - GUARD + 1  # the envelope ready at the last judgement
+            if self._ends_for != k:  # asked once a pulse: the tracks change only when a pulse is committed
+                self._ends_for, self._ends = k, self._echo_ends(k)
+            if any(judged < due + lag + margin and ready >= due + lag - margin for lag in self._ends):
+                env.skip(int(due) - lock.guard - 4)
+                env.compute(ready)
+                partial = self._echoes.find(env, due, ready, clipped=self._clipped_at > due - 8192)
+        # The judgement changes with the tracks, a pulse still arriving, when a surface's approach
+        # grows a second old, or as the wearer walks on toward a threshold: otherwise it stands.
+        t_now = self._now / self.fs
+        if changed or partial or t_now >= self._judge_at or t_now - self._oldest_approach > 1.0 \
+                or "unlocked" in self._verdict.flags:
+            self._judge(partial, sch.emission(k) / self.fs)
         self._judged = self._now
 
-    def _echo_ends(self, t: float) -> list[float]:
-        """For each surface in the way (or not yet known not to be) that may cross an alert
-        threshold with the pulse emitted at ``t`` (within 0.3 m of a distance threshold, or 0.5 s
-        of the time-to-contact one): the lag (samples from the emission) at which its echo will
-        have wholly arrived."""
+    def _echo_ends(self, k: int) -> list[float]:
+        """For each surface in the way (or not yet known not to be: near the stop only) whose
+        echo of pulse ``k`` may take the alert across a threshold (its distance, by the time the
+        echo is in, within a pulse's walk and 5 cm of one; or its time to contact within a
+        pulse and 50 ms of the caution's): the lag of that echo, in samples after the direct
+        sound."""
         out = []
+        t = self.schedule.emission(k) / self.fs
+        due = self._lock.due(k)
+        h = self.hysteresis_m
+        period_s = self.period / self.fs
         for tr in self._tracks:
             if t - tr.approached_at <= 1.0 and (tr.ahead or (tr.ahead is None and len(tr.times) >= 7)):
                 d = tr.predict(t)  # (an undecided track: one echo more may decide it)
-                closing = -(tr.speed or 0.0)
-                near = self.caution_m if tr.ahead else self.stop_m  # undecided: near the stop only
-                if d < near + 0.3 or (tr.ahead and closing > 0.05 and d / closing < self.caution_ttc_s + 0.5):
-                    s = self.mic_offset_m
-                    path = np.sqrt((2 * max(d, 0.0)) ** 2 + s ** 2) - s
-                    out.append((self._direct_delay or 0.0) + path / SPEED_OF_SOUND * self.fs + len(self.probe))
+                closing = max(-(tr.speed or 0.0), 0.0)
+                s = self.mic_offset_m
+                lag = (np.sqrt((2 * max(d, 0.0)) ** 2 + s ** 2) - s) / SPEED_OF_SOUND * self.fs
+                d_now = d - closing * max((due + lag + len(self.probe)) / self.fs - t, 0.0)
+                reach = closing * period_s + 0.05
+                thresholds = (self.stop_m, self.stop_m + h) + ((self.caution_m, self.caution_m + h) if tr.ahead else ())
+                near = any(abs(d_now - thr) < reach for thr in thresholds)
+                if tr.ahead and closing > 0.05:
+                    near = near or abs(d_now / closing - self.caution_ttc_s) < period_s + 0.05 \
+                        or abs(d_now / closing - 1.1 * self.caution_ttc_s) < period_s + 0.05
+                if near:
+                    out.append(lag)
         return out
 
-    def _detect(self, k: int, stop: int):
-        """Echo distances (m) and strengths of pulse ``k`` from its samples up to ``stop``, keeping
-        the echoes that have ended before any damage; None when damage reaches the direct sound."""
-        e = k * self.period
-        x, good = self._samples(e, min(stop, e + self.window))
-        if good < len(x):  # damage ends the window: the echoes wholly heard before it count
-            reference = self.latency_max if self._direct_delay is None else self._direct_delay
-            if good < reference + 2 * len(self.probe):
-                return None  # (the direct sound must be whole: it is the reference)
-            x = x[:good]
-        if len(x) < len(self.probe) + 8:
-            return None
-        n = self._fft_sizes.get(len(x))
-        if n is None:
-            n = self._fft_sizes[len(x)] = fft.next_fast_len(len(x) + len(self.probe), real=True)
-        env = analytic_envelope(x.astype(np.float32), self._kernel(n), n)[:len(x) - len(self.probe) + 1]  # lags where the whole probe fits: ended echoes
-        head = env[:self.latency_max]
-        if not len(head):
-            return None
-        d0 = int(np.argmax(head))
-        direct = float(parabolic_peaks(env, (d0,))[0])
-        if self._direct_delay is None:
-            self._direct_delay = direct
-        elif 0.5 < abs(direct - self._direct_delay) <= 3:  # drift; a larger jump is a stray peak: kept out
-            self._direct_delay = 0.9 * self._direct_delay + 0.1 * direct
-        ref = self._direct_delay
-        peak_direct = env[d0]
-        sidelobe = self._sidelobe
-        rail = np.count_nonzero(_at_rail(x[d0:d0 + len(self.probe)]))
-        if rail >= 3:  # the direct sound clipped: its distortion rises above the sidelobes, near it
-            sidelobe = self._clipped_sidelobe(rail / len(self.probe))
-        lo = int(ref + 2 * self.min_range_m / SPEED_OF_SOUND * self.fs)
-        if lo >= len(env) - 2:
-            return []
-        seg = env[lo:]
-        quarter = seg[::4]  # every 4th lag: the floor, at a quarter of the cost
-        noise = float(np.partition(quarter, len(quarter) // 2)[len(quarter) // 2]) + 1e-12
-        # The direct sound's matched-filter sidelobes fall off with lag; an echo must rise above both.
-        floor = np.maximum(self.threshold * noise, peak_direct * sidelobe[lo - int(ref):len(env) - int(ref)])
-        above = np.flatnonzero(seg[1:-1] > floor[1:-1]) + 1  # few: the echoes' main lobes
-        above = above[(seg[above] > seg[above - 1]) & (seg[above] >= seg[above + 1])]  # their local maxima
-        if not len(above):
-            return []
-        peaks = above + lo
-        s = self.mic_offset_m
-        path = SPEED_OF_SOUND * (parabolic_peaks(env, peaks) - ref) / self.fs + s
-        d = 0.5 * np.sqrt(np.maximum(path ** 2 - s ** 2, 0.0))
-        ok = (path > s) & (d >= self.min_range_m) & (d <= self.max_range_m)
-        return _merge(list(zip(d[ok].tolist(), (env[peaks][ok] / peak_direct).tolist())), 0.03)
-
     def _associate(self, t: float, echoes) -> list[tuple[Track | None, float, float]]:
-        """Each echo (nearest first) with the nearest unclaimed track whose prediction lies within
-        12 cm, or None (a new surface)."""
-        order = sorted(range(len(self._tracks)), key=lambda i: self._tracks[i].predict(t))
-        predicted = [self._tracks[i].predict(t) for i in order]  # ascending, plain floats
-        free = [True] * len(predicted)
+        """Each echo with a track whose prediction lies within its gate (:attr:`Track.gate_m`), or
+        None (a new surface): the
+        closest pairs first, so a stray peak beside a surface's echo (another headset's ping)
+        never takes its track. Of the echoes left, those within 3 cm of another are one surface
+        (the strongest kept), and none is kept within 3 cm of a track's echo."""
+        predicted = sorted((tr.predict(t), i) for i, tr in enumerate(self._tracks))
+        at = [d for d, _ in predicted]  # ascending, plain floats
+        gates = [self._tracks[i].gate_m for _, i in predicted]
+        echoes = sorted(echoes)
         pairs = []
-        for d, strength in sorted(echoes):
-            j, gap = -1, 0.12
-            at = bisect.bisect_left(predicted, d)
-            for i in range(at - 1, -1, -1):  # nearer tracks first, on either side, within 12 cm
-                if d - predicted[i] >= gap:
-                    break
-                if free[i]:
-                    j, gap = i, d - predicted[i]
-                    break
-            for i in range(at, len(predicted)):
-                if predicted[i] - d >= gap:
-                    break
-                if free[i]:
-                    j, gap = i, predicted[i] - d
-                    break
-            if j >= 0:
-                free[j] = False
-                pairs.append((self._tracks[order[j]], d, strength))
-            else:
-                pairs.append((None, d, strength))
-        return pairs
+        for j, (d, _) in enumerate(echoes):
+            for i in range(bisect.bisect_left(at, d - 0.12), bisect.bisect_right(at, d + 0.12)):
+                gap = abs(at[i] - d)
+                if gap < gates[i]:
+                    pairs.append((gap, j, predicted[i][1]))
+        pairs.sort()
+        track_of: dict[int, int] = {}
+        taken = set()
+        for _, j, i in pairs:
+            if j not in track_of and i not in taken:
+                track_of[j] = i
+                taken.add(i)
+        out = [(self._tracks[i], echoes[j][0], echoes[j][1]) for j, i in track_of.items()]
+        claimed = sorted(d for _, d, _ in out)
+        new = []
+        for d, strength in sorted(echoes[j] for j in range(len(echoes)) if j not in track_of):
+            c = bisect.bisect_left(claimed, d)
+            if (c < len(claimed) and claimed[c] - d < 0.03) or (c > 0 and d - claimed[c - 1] < 0.03):
+                continue
+            if new and d - new[-1][1] < 0.03:
+                if strength > new[-1][2]:
+                    new[-1] = (None, d, strength)
+                continue
+            new.append((None, d, strength))
+        return out + new
 
-    def _commit(self, k: int, echoes) -> None:
-        t = k * self.period / self.fs
+    def _commit(self, t: float, echoes) -> None:
+        """Add the echoes of the pulse emitted at ``t`` (seconds) to the tracks."""
         updated = []
         for tr, d, strength in self._associate(t, echoes):
             if tr is None:
@@ -572,18 +578,19 @@ class BoundaryMonitor:
             updated.append(tr)
         # Only a surface being approached can need an alert: the fits are for those.
         still = self._still = [tr.d_hat for tr in self._tracks
-                 if len(tr.times) >= 10 and tr.speed is not None and abs(tr.speed) < 0.25 and tr.d_hat >= self.miss_m]
+                               if len(tr.times) >= 10 and tr.speed is not None and abs(tr.speed) < 0.25
+                               and tr.d_hat >= self.miss_m and tr.jitter < 0.015 ** 2]
         for tr in updated:
             tr.ahead = None
             closing = -(tr.speed or 0.0)
-            soon = tr.d_hat < self.caution_m + 1.0 or (closing > 0.05 and tr.d_hat / closing < self.caution_ttc_s + 1.5)
-            if t - tr.approached_at <= 1.0 and soon:  # the fit only where an alert may come within a second or so
+            soon = tr.d_hat < self.caution_m + 0.5 or (closing > 0.05 and tr.d_hat / closing < self.caution_ttc_s + 0.75)
+            if t - tr.approached_at <= 1.0 and soon:  # the fit only where an alert may come within half a second or so
                 tr.ahead = tr.in_the_way(self.miss_m)
                 if tr.ahead and tr.explained_by(still):
                     tr.ahead = False
         self._tracks = [tr for tr in self._tracks if t - tr.times[-1] <= 0.3]
-        if len(self._tracks) > 32:  # clutter: keep the nearest
-            self._tracks = sorted(self._tracks, key=lambda tr: tr.dists[-1])[:32]
+        if len(self._tracks) > 32:  # clutter: keep the surfaces followed longest, then the nearest
+            self._tracks = sorted(self._tracks, key=lambda tr: (-min(len(tr.times), 8), tr.dists[-1]))[:32]
 
     def _level_for(self, d: float, ttc: float) -> str:
         """The alert a surface at ``d`` m, ``ttc`` s from contact calls for, with hysteresis
@@ -596,9 +603,10 @@ class BoundaryMonitor:
             return "caution"
         return "clear"
 
-    def _judge(self, partial, current: int) -> None:
+    def _judge(self, partial, t_pulse: float) -> None:
+        """The alert: the gravest level any surface in the way calls for (see the module's notes),
+        ``partial`` the echoes so far of the pulse emitted at ``t_pulse`` (seconds)."""
         t_now = self._now / self.fs
-        t_pulse = current * self.period / self.fs
         best = None
         provisional = {}
         if partial:  # echoes of the pulse still arriving: the alert may not wait for the window's end
@@ -606,6 +614,7 @@ class BoundaryMonitor:
                 if tr is not None:
                     provisional[id(tr)] = d
         self._oldest_approach = np.inf
+        self._judge_at = np.inf
         for tr in self._tracks:
             if t_now - tr.approached_at > 1.0 or tr.ahead is False:
                 continue
@@ -617,8 +626,13 @@ class BoundaryMonitor:
             d = provisional.get(id(tr), tr.dists[-1])
             at = t_pulse if id(tr) in provisional else tr.times[-1]
             closing = -v if v is not None else 0.0
-            ttc = d / closing if closing > 0.05 else np.inf
-            level = self._level_for(d, ttc)
+            d_now = d - max(closing, 0.0) * self._stale_s(at)  # where the wearer may be by now
+            ttc = d_now / closing if closing > 0.05 else np.inf
+            level = self._level_for(d_now, ttc)
+            if closing > 0.05:  # when, walking on, it reaches a threshold it has not reached
+                soon = [(d_now - thr) / closing for thr in (self.stop_m, self.caution_m) if d_now > thr]
+                soon.append(ttc - self.caution_ttc_s if ttc > self.caution_ttc_s else np.inf)
+                self._judge_at = min(self._judge_at, t_now + max(min(soon), 0.0))
             if best is None or (-_RANK[level], ttc, d) < (-_RANK[best[5]], best[2], best[0]):  # gravest, then soonest
                 best = (d, closing, ttc, tr, at, level)
         self._verdict_track = None if best is None else best[3]
@@ -626,55 +640,14 @@ class BoundaryMonitor:
             self._level = "clear"
             moving = any(abs(tr.closed_in(0.8)) >= self.approach_m for tr in self._tracks)
             self._verdict = Alert("clear", None, "opening" if moving else None, 0.0, None, None,
-                                () if self._tracks else ("no_echo",))
+                                  () if self._tracks else ("no_echo",))
         else:
             d, closing, ttc, tr, at, level = best
             self._level = level
-            conf = float(np.clip(min(len(tr.dists), 10) / 10 * min(1.0, np.mean(tr.strengths) * 200), 0, 1))
+            conf = min(len(tr.dists), 10) / 10 * min(1.0, sum(tr.strengths) / len(tr.strengths) * 200)
             self._verdict = Alert(level, float(d), "closed", conf, float(closing), None if np.isinf(ttc) else float(ttc),
-                                (), float(at))
+                                  (), float(at))
 
 
 _RANK = {"clear": 0, "caution": 1, "stop": 2}
-
-
-def _merge(echoes, within_m: float):
-    """One echo per surface: peaks closer than ``within_m`` keep the strongest."""
-    out = []
-    for d, s in sorted(echoes):
-        if out and d - out[-1][0] < within_m:
-            if s > out[-1][1]:
-                out[-1] = (d, s)
-            continue
-        out.append((d, s))
-    return out
-
-
-def _zero_runs(x: np.ndarray, min_len: int) -> np.ndarray:
-    """Samples in runs of at least ``min_len`` exact zeros (a dropout, not silence: real
-    microphones always carry noise)."""
-    if np.count_nonzero(x) == len(x):
-        return np.zeros(len(x), bool)
-    z = np.concatenate([[False], x == 0, [False]])
-    edges = np.flatnonzero(np.diff(z.astype(np.int8)))
-    out = np.zeros(len(x), bool)
-    for a, b in zip(edges[::2], edges[1::2]):
-        if b - a >= min_len:
-            out[a:b] = True
-    return out
-
-
-def _at_rail(x: np.ndarray) -> np.ndarray:
-    """The samples at ``x``'s largest magnitude (none if it is silent)."""
-    a = np.abs(x)
-    m = float(a.max(initial=0.0))
-    return a >= m * (1 - 1e-6) if m > 0.0 else np.zeros(len(a), bool)
-
-
-def _clipped(x: np.ndarray) -> bool:
-    """Flat tops: three or more consecutive samples at the block's largest magnitude (a clipping
-    converter or limiter holds its rail; a real signal does not)."""
-    top = _at_rail(x)
-    if np.count_nonzero(top) < 3:  # the usual block: one loudest sample
-        return False
-    return bool(np.any(top[2:] & top[1:-1] & top[:-2]))
+_TRUE = np.ones(8192, bool)  # every sample sound: the usual block's mask, never written to

@@ -36,6 +36,14 @@ class Track:
         The filtered distance in metres at the last echo.
     views : dict of str to float
         What the camera made of it: surface ("wall", "glass", "mirror") to summed confidence.
+    jitter : float
+        The filter's residuals' mean square, in square metres (a running mean): how far its
+        echoes stray from its prediction.
+    gate_m : float
+        How far from its prediction an echo may lie and still be this surface's, in metres:
+        12 cm while the track is young (its speed not yet known), then five times its rms
+        residual, at least 4 cm (so another headset's pings, which land elsewhere every pulse,
+        seldom fall in it).
     """
 
     times: deque = field(default_factory=lambda: deque(maxlen=64))
@@ -46,6 +54,8 @@ class Track:
     ahead: bool | None = None  # in the wearer's way, at the last update (None: cannot tell yet)
     d_hat: float = 0.0
     views: dict = field(default_factory=dict)  # what the camera made of it: surface -> summed confidence
+    jitter: float = 0.0025  # residuals' mean square (m^2): starts at (5 cm)^2
+    gate_m: float = 0.12  # how far from its prediction an echo may lie and be this surface's
 
     @property
     def surface(self) -> str:
@@ -94,11 +104,14 @@ class Track:
             else:
                 predicted = self.predict(t)
                 r = d - predicted
+                self.jitter += 0.2 * (r * r - self.jitter)
                 self.d_hat = predicted + alpha * r
                 self.speed += beta * r / max(dt, 1e-3)
         self.times.append(t)
         self.dists.append(d)
         self.strengths.append(strength)
+        if len(self.times) >= 5:
+            self.gate_m = min(0.12, max(0.04, 5.0 * self.jitter ** 0.5))
 
     def _history(self, extra=None):
         """The track's times and distances, with one more point ``extra`` = (t, d) if given."""

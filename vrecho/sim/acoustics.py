@@ -180,6 +180,8 @@ def _cache_key(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: int, sim:
     payload = {"room": d["room"], "discontinuities": d["discontinuities"], "source": np.round(source, 6).tolist(),
                "mics": np.round(mics, 6).tolist(), "fs": fs,
                "facing": None if facing is None else [np.round(facing, 6).tolist(), scene.emitter_p], "sim": asdict(sim), "pra": pra.__version__, "v": 4}
+    if d["furniture"]:  # (only then: the keys of rooms without furniture stay what they were)
+        payload["furniture"] = d["furniture"]
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:32]
 
 

@@ -1,0 +1,529 @@
+"""The headset's ranging front end: its probe and when it plays it, the microphone's matched-filter
+envelope as a stream, and the lock on its own round trip.
+
+A real duplex stream delays what the loudspeaker plays by an unknown round trip before the
+microphone hands it back (0 to 300 ms and more, changing after an underrun), and other headsets
+in the room play the same call. So:
+
+- :class:`ProbeSchedule`: each pulse leaves a whole period after the last plus a dither of up to
+  a few milliseconds, drawn from the monitor's own seed. The monitor's own echoes keep their
+  delays after its own direct sound from pulse to pulse; another headset's pings (its own dither)
+  land somewhere else every pulse, so no track follows them.
+- :class:`Envelope`: the microphone's samples and the envelope of their correlation with the
+  probe, computed once per sample as the stream arrives (in pieces of any size; a few samples of
+  guard at each piece's edges keep the analytic signal exact to -50 dB).
+- :class:`EchoFinder`: a pulse's echoes in the envelope, timed against its direct sound.
+
+The lock on the monitor's own round trip is :mod:`.roundtrip`'s.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import fft
+from scipy.ndimage import maximum_filter1d
+from scipy.signal import chirp
+from scipy.signal.windows import tukey
+
+from ..errors import VrechoError
+from ..signals import SPEED_OF_SOUND, analytic_envelope, analytic_filter, parabolic_peaks
+
+GUARD = 16
+"""Samples of guard at each edge of a piece of the streamed envelope (the analytic signal's tails
+are 50 dB down there)."""
+POOL = 4
+"""Samples per cell of the coarse envelope the round trip is first searched in (the envelope's
+main lobe is some 3 samples wide)."""
+
+
+def ranging_probe(fs: int, *, duration_s: float = 0.005, f0: float = 4000.0, f1: float = 20000.0) -> np.ndarray:
+    """The ranging probe: a linear chirp from ``f0`` to ``f1`` Hz over ``duration_s``, Tukey
+    window (25 %), peak 0.5.
+
+    Parameters
+    ----------
+    fs : int
+        Sample rate in Hz.
+    duration_s : float
+        The chirp's length in seconds (default 5 ms).
+    f0, f1 : float
+        The chirp's start and end frequencies in Hz (default 4 and 20 kHz).
+
+    Returns
+    -------
+    numpy.ndarray [shape=(round(duration_s * fs),), dtype=float64]
+
+    Raises
+    ------
+    VrechoError
+        When ``f1`` is not below the Nyquist frequency ``fs / 2``.
+
+    Examples
+    --------
+    >>> from vrecho.headset import ranging_probe
+    >>> ranging_probe(48000).shape
+    (240,)
+    """
+    if f1 >= fs / 2:
+        raise VrechoError(f"probe: {f1} Hz needs a sample rate above {2 * f1:.0f} Hz, got {fs}")
+    t = np.arange(int(round(duration_s * fs))) / fs
+    return (0.5 * chirp(t, f0, duration_s, f1) * tukey(len(t), 0.25)).astype(np.float64)
+
+
+def _mix(seed: int, k: int) -> int:
+    """splitmix64 of (seed, k): a pulse's dither, at random access."""
+    z = (seed + 0x9E3779B97F4A7C15 * (k + 1)) & 0xFFFFFFFFFFFFFFFF
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & 0xFFFFFFFFFFFFFFFF
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & 0xFFFFFFFFFFFFFFFF
+    return z ^ (z >> 31)
+
+
+class ProbeSchedule:
+    """When the probe is played: pulse ``k`` starts at sample ``k * period + dither_k``.
+
+    Parameters
+    ----------
+    fs : int
+        Sample rate in Hz.
+    probe : numpy.ndarray [shape=(m,)]
+        The pulse played.
+    period_s : float
+        The nominal time between pulses in seconds (default 0.04).
+    dither_s : float
+        Each pulse leaves up to this much later than its period's start, in seconds (default
+        0.005; 0 plays a regular train).
+    seed : int, optional
+        Draws the dithers; a fresh random one by default, so that two headsets differ.
+
+    Attributes
+    ----------
+    period, dither : int
+        The period and the largest dither, in samples.
+
+    Examples
+    --------
+    >>> from vrecho.headset.ranging import ProbeSchedule, ranging_probe
+    >>> s = ProbeSchedule(48000, ranging_probe(48000), seed=1)
+    >>> [s.emission(k) for k in range(3)]
+    [74, 2044, 3876]
+    >>> s.first_at_or_after(2000)
+    1
+    """
+
+    def __init__(self, fs: int, probe: np.ndarray, *, period_s: float = 0.04, dither_s: float = 0.005,
+                 seed: int | None = None):
+        self.fs = int(fs)
+        self.probe = np.asarray(probe, float)
+        self.period = int(round(period_s * fs))
+        self.dither = int(round(dither_s * fs))
+        self.seed = int(np.random.SeedSequence(seed).generate_state(1, np.uint64)[0])
+        self._recent: dict[int, int] = {}
+
+    def emission(self, k: int) -> int:
+        """The sample at which pulse ``k`` (0, 1, ...) starts.
+
+        Parameters
+        ----------
+        k : int
+
+        Returns
+        -------
+        int
+        """
+        e = self._recent.get(k)
+        if e is None:
+            if len(self._recent) > 256:
+                self._recent.clear()
+            e = self._recent[k] = k * self.period + (_mix(self.seed, k) % (self.dither + 1) if self.dither else 0)
+        return e
+
+    def first_at_or_after(self, n: int) -> int:
+        """The first pulse that starts at or after sample ``n``.
+
+        Parameters
+        ----------
+        n : int
+
+        Returns
+        -------
+        int
+        """
+        k = max((n - self.dither) // self.period, 0)
+        while self.emission(k) < n:
+            k += 1
+        return k
+
+    def block(self, start: int, n: int) -> np.ndarray:
+        """The loudspeaker's samples ``start`` to ``start + n``.
+
+        Parameters
+        ----------
+        start, n : int
+            The block's first sample and its length.
+
+        Returns
+        -------
+        numpy.ndarray [shape=(n,), dtype=float64]
+        """
+        out = np.zeros(n)
+        m = len(self.probe)
+        k = self.first_at_or_after(max(start - m + 1, 0))
+        while (e := self.emission(k)) < start + n:
+            lo, hi = max(e, start), min(e + m, start + n)
+            if hi > lo:
+                out[lo - start:hi - start] = self.probe[lo - e:hi - e]
+            k += 1
+        return out
+
+
+class Envelope:
+    """The microphone's stream: its last samples, which of them are sound (not a dropout's zeros
+    or NaNs), and the envelope of their correlation with the probe, by lag.
+
+    The envelope at lag ``l`` says how much of the probe starts at sample ``l``; it is computed
+    once, in order, when asked for (:meth:`compute`), from samples ``l - GUARD`` to
+    ``l + m + GUARD``.
+
+    Parameters
+    ----------
+    probe : numpy.ndarray [shape=(m,)]
+        The probe.
+    size : int
+        Samples kept (and envelope lags); older ones are forgotten.
+
+    Attributes
+    ----------
+    n : int
+        Samples received so far.
+    done : int
+        Lags whose envelope is computed: ``[done - size, done)`` are held.
+    coarse : numpy.ndarray [shape=(size // POOL,)]
+        The envelope's largest value in each cell of :data:`POOL` lags (cell ``g``: lags
+        ``g * POOL`` on), as a ring like the envelope's; kept only while :attr:`searching`.
+    searching : bool
+        Keep :attr:`coarse` (setting it True fills it from the envelope held).
+    """
+
+    def __init__(self, probe: np.ndarray, size: int):
+        self.probe = np.asarray(probe, np.float32)
+        self.size = int(size)
+        self.x = np.zeros(self.size, np.float32)
+        self.ok = np.zeros(self.size, bool)
+        self.env = np.zeros(self.size, np.float32)
+        self.coarse = np.zeros(self.size // POOL, np.float32)
+        self._searching = True
+        self.n = 0
+        self.done = 0
+        self._kernels: dict[int, np.ndarray] = {}
+
+    def push(self, x: np.ndarray, ok: np.ndarray) -> None:
+        """Append samples (at most :attr:`size` at a time).
+
+        Parameters
+        ----------
+        x : numpy.ndarray [shape=(k,)]
+            Samples, non-finite ones already zeroed.
+        ok : numpy.ndarray [shape=(k,), dtype=bool]
+            Which are sound.
+        """
+        at = self.n % self.size
+        first = min(len(x), self.size - at)
+        self.x[at:at + first], self.ok[at:at + first] = x[:first], ok[:first]
+        self.x[:len(x) - first], self.ok[:len(x) - first] = x[first:], ok[first:]
+        self.n += len(x)
+
+    def ready(self) -> int:
+        """The end of the lags whose envelope the samples received allow (exclusive).
+
+        Returns
+        -------
+        int
+        """
+        return self.n - len(self.probe) - GUARD + 1
+
+    def compute(self, upto: int) -> None:
+        """Compute the envelope up to lag ``upto`` (exclusive), or as far as the samples allow.
+
+        Parameters
+        ----------
+        upto : int
+        """
+        upto = min(upto, self.ready())
+        self.done = max(self.done, self.n - self.size + GUARD)  # lags whose samples are gone stay unknown
+        m = len(self.probe)
+        while self.done < upto:
+            lo = self.done
+            hi = min(upto, lo + 8192)
+            seg = self.samples(lo - GUARD, hi + m + GUARD - 1) if lo >= GUARD else \
+                np.r_[np.zeros(GUARD - lo, np.float32), self.samples(0, hi + m + GUARD - 1)]
+            nfft = fft.next_fast_len(len(seg) + m + GUARD, real=True)
+            kernel = self._kernels.get(nfft)
+            if kernel is None:
+                kernel = self._kernels[nfft] = analytic_filter(self.probe, nfft).astype(np.complex64)
+            env = analytic_envelope(seg, kernel, nfft)[GUARD:GUARD + hi - lo]
+            a = lo % self.size
+            first = min(len(env), self.size - a)
+            self.env[a:a + first] = env[:first]
+            self.env[:len(env) - first] = env[first:]
+            self.done = hi
+            if self._searching:
+                self._cells(lo, hi)
+
+    def skip(self, to: int) -> None:
+        """Leave the envelope of lags up to ``to`` uncomputed (zero): none will be asked for.
+
+        Parameters
+        ----------
+        to : int
+        """
+        if to > self.done and not self._searching:
+            a, b = max(self.done, to - self.size), to
+            a0 = a % self.size
+            first = min(b - a, self.size - a0)
+            self.env[a0:a0 + first] = 0.0
+            self.env[:b - a - first] = 0.0
+            self.done = to
+
+    @property
+    def searching(self) -> bool:
+        """Whether :attr:`coarse` is kept (setting it True fills it from the envelope held)."""
+        return self._searching
+
+    @searching.setter
+    def searching(self, on: bool) -> None:  # noqa: D102 (the property's docstring)
+        if on and not self._searching:
+            self._cells(max(self.done - self.size + POOL, 0), self.done)
+        self._searching = bool(on)
+
+    def _cells(self, lo: int, hi: int) -> None:
+        """:attr:`coarse` for lags ``lo`` to ``hi`` (the first and last cells may be partly older or
+        not yet done)."""
+        g0, g1 = lo // POOL, -(-hi // POOL)
+        cells = self._ring(self.env, g0 * POOL, g1 * POOL).reshape(-1, POOL).max(axis=1)
+        c = self.coarse
+        a = g0 % len(c)
+        first = min(len(cells), len(c) - a)
+        c[a:a + first], c[:len(cells) - first] = cells[:first], cells[first:]
+
+    def _ring(self, ring: np.ndarray, a: int, b: int) -> np.ndarray:
+        a0 = a % self.size
+        if a0 + (b - a) <= self.size:
+            return ring[a0:a0 + b - a]
+        return ring[np.arange(a, b) % self.size]
+
+    def cells(self, g0: int, g1: int) -> np.ndarray:
+        """:attr:`coarse` cells ``g0`` to ``g1`` (computed ones only).
+
+        Parameters
+        ----------
+        g0, g1 : int
+
+        Returns
+        -------
+        numpy.ndarray [shape=(g1 - g0,), dtype=float32]
+        """
+        c = self.coarse
+        a = g0 % len(c)
+        return c[a:a + g1 - g0] if a + g1 - g0 <= len(c) else c[np.arange(g0, g1) % len(c)]
+
+    def samples(self, a: int, b: int) -> np.ndarray:
+        """Samples ``a`` to ``b`` (held ones only).
+
+        Parameters
+        ----------
+        a, b : int
+
+        Returns
+        -------
+        numpy.ndarray [shape=(b - a,), dtype=float32]
+        """
+        return self._ring(self.x, a, b)
+
+    def envelope(self, a: int, b: int) -> np.ndarray:
+        """The envelope at lags ``a`` to ``b`` (computed ones only).
+
+        Parameters
+        ----------
+        a, b : int
+
+        Returns
+        -------
+        numpy.ndarray [shape=(b - a,), dtype=float32]
+        """
+        return self._ring(self.env, a, b)
+
+    def sound_until(self, a: int, b: int) -> int:
+        """The first sample from ``a`` on, before ``b``, that is not sound (``b`` if none).
+
+        Parameters
+        ----------
+        a, b : int
+
+        Returns
+        -------
+        int
+        """
+        ok = self._ring(self.ok, a, b)
+        return b if ok.all() else a + int(np.argmin(ok))
+
+
+class EchoFinder:
+    """A pulse's echoes in the envelope: peaks above the noise floor (``threshold`` times the
+    envelope's median) and above the direct sound's sidelobes (when the direct sound is clipped,
+    above the clipped probe's own distortion, which spreads over one probe's length after it),
+    each timed to a fraction of a sample. A surface straight ahead at ``d`` returns the echo
+    path ``L = sqrt((2 d)^2 + s^2)`` (``s``: loudspeaker to microphone): ``d`` follows.
+
+    Parameters
+    ----------
+    probe : numpy.ndarray [shape=(m,)]
+        The probe.
+    fs : int
+        Sample rate in Hz.
+    window : int
+        The longest lag after the direct sound looked at, in samples.
+    threshold : float
+        How far above the envelope's median an echo must rise (a factor).
+    min_range_m, max_range_m : float
+        The distances echoes are looked for between, in metres.
+    mic_offset_m : float
+        Loudspeaker to microphone, in metres.
+    """
+
+    def __init__(self, probe: np.ndarray, fs: int, window: int, *, threshold: float, min_range_m: float,
+                 max_range_m: float, mic_offset_m: float):
+        self.probe, self.fs, self.window = probe, fs, window
+        self.threshold, self.min_range_m, self.max_range_m, self.mic_offset_m = threshold, min_range_m, max_range_m, mic_offset_m
+        self._clipped_floors: dict[int, np.ndarray] = {}
+        lag = np.arange(window + len(probe), dtype=float)  # the direct sound's sidelobes by lag
+        self._sidelobe = 10 ** (-(32 + 6 * np.log2(np.maximum(lag, 1) / (0.5 * len(probe)) + 1)) / 20)
+
+    def _clipped_sidelobe(self, fraction: float) -> np.ndarray:
+        """The floor beside a clipped direct sound: the matched filter's response to the probe
+        clipped so that ``fraction`` of its samples sit at the rail (its distortion spreads over
+        one probe's length after the peak, up to some 30 dB below it), 6 dB above that, and never
+        below the clean sidelobes. Cached in steps of 5 %."""
+        step = max(1, int(round(fraction * 20)))
+        if step not in self._clipped_floors:
+            peak = np.abs(self.probe).max()  # (clipped wholly: its signs)
+            level = max(np.quantile(np.abs(self.probe), 1 - step / 20), 1e-3 * peak)
+            m = len(self.probe)
+            n = 4 * m
+            x = np.zeros(n - m)
+            x[:m] = np.clip(self.probe, -level, level)
+            env = analytic_envelope(x, analytic_filter(self.probe, n), n)[:n - m]  # past n - m: negative lags
+            profile = np.zeros(max(len(self._sidelobe), n - m))
+            profile[:len(env)] = maximum_filter1d(env / env[0], 9)  # a few samples' slack in timing
+            self._clipped_floors[step] = np.maximum(self._sidelobe, 2.0 * profile[:len(self._sidelobe)])
+        return self._clipped_floors[step]
+
+    def find(self, env: Envelope, ref: float, stop: int, *, clipped: bool = False):
+        """The echoes of the pulse whose direct sound arrived at ``ref``, from the envelope up to
+        lag ``stop``, keeping those that have ended before any damage.
+
+        Parameters
+        ----------
+        env : Envelope
+            The stream, its envelope computed up to ``stop``.
+        ref : float
+            The direct sound's arrival, in fractional samples: the time reference.
+        stop : int
+            The lag up to which to look (exclusive).
+        clipped : bool
+            Whether a block near the direct sound came clipped (its distortion is then kept out).
+
+        Returns
+        -------
+        list of (float, float) or None
+            Each echo's distance in metres and strength (its peak as a share of the direct
+            sound's); None when damage (a dropout, NaNs) reaches the direct sound.
+        """
+        d0 = int(round(ref))
+        m = len(self.probe)
+        good = env.sound_until(d0 - GUARD, stop + m)
+        if good < d0 + m + GUARD:
+            return None  # (the direct sound must be whole: it is the reference)
+        stop = min(stop, good - m - GUARD + 1)  # damage ends the window: the echoes wholly heard before it count
+        lo = int(ref + 2 * self.min_range_m / SPEED_OF_SOUND * self.fs)
+        if lo >= stop - 2:
+            return []
+        span = env.envelope(d0, stop)
+        peak_direct = float(env.envelope(d0 - 1, d0 + 2).max())
+        sidelobe = self._sidelobe
+        if clipped:
+            rail = np.count_nonzero(at_rail(env.samples(d0, d0 + m)))
+            if rail >= 3:  # the direct sound clipped: its distortion rises above the sidelobes, near it
+                sidelobe = self._clipped_sidelobe(rail / m)
+        seg = span[lo - d0:]
+        quarter = seg[::4]  # every 4th lag: the floor, at a quarter of the cost
+        noise = float(np.partition(quarter, len(quarter) // 2)[len(quarter) // 2]) + 1e-12
+        above = np.flatnonzero(seg[1:-1] > self.threshold * noise) + 1  # few: the echoes' main lobes
+        above = above[(seg[above] > seg[above - 1]) & (seg[above] >= seg[above + 1])]  # their local maxima
+        # The direct sound's matched-filter sidelobes fall off with lag; an echo must rise above them too.
+        peaks = above + lo - d0
+        peaks = peaks[span[peaks] > peak_direct * sidelobe[peaks]]
+        if not len(peaks):
+            return []
+        s = self.mic_offset_m
+        path = SPEED_OF_SOUND * (parabolic_peaks(span, peaks) + d0 - ref) / self.fs + s
+        d = 0.5 * np.sqrt(np.maximum(path ** 2 - s ** 2, 0.0))
+        ok = (path > s) & (d >= self.min_range_m) & (d <= self.max_range_m)
+        return list(zip(d[ok].tolist(), (span[peaks][ok] / peak_direct).tolist()))
+
+
+def zero_runs(x: np.ndarray, min_len: int) -> np.ndarray:
+    """Samples in runs of at least ``min_len`` exact zeros (a dropout, not silence: real
+    microphones always carry noise).
+
+    Parameters
+    ----------
+    x : numpy.ndarray [shape=(n,)]
+    min_len : int
+
+    Returns
+    -------
+    numpy.ndarray [shape=(n,), dtype=bool]
+    """
+    if np.count_nonzero(x) == len(x):
+        return np.zeros(len(x), bool)
+    z = np.concatenate([[False], x == 0, [False]])
+    edges = np.flatnonzero(np.diff(z.astype(np.int8)))
+    out = np.zeros(len(x), bool)
+    for a, b in zip(edges[::2], edges[1::2]):
+        if b - a >= min_len:
+            out[a:b] = True
+    return out
+
+
+def at_rail(x: np.ndarray) -> np.ndarray:
+    """The samples at ``x``'s largest magnitude (none if it is silent).
+
+    Parameters
+    ----------
+    x : numpy.ndarray [shape=(n,)]
+
+    Returns
+    -------
+    numpy.ndarray [shape=(n,), dtype=bool]
+    """
+    a = np.abs(x)
+    m = float(a.max(initial=0.0))
+    return a >= m * (1 - 1e-6) if m > 0.0 else np.zeros(len(a), bool)
+
+
+def clipped(x: np.ndarray) -> bool:
+    """Flat tops: three or more consecutive samples at the block's largest magnitude (a clipping
+    converter or limiter holds its rail; a real signal does not).
+
+    Parameters
+    ----------
+    x : numpy.ndarray [shape=(n,)]
+
+    Returns
+    -------
+    bool
+    """
+    top = at_rail(x)
+    if np.count_nonzero(top) < 3:  # the usual block: one loudest sample
+        return False
+    return bool(np.any(top[2:] & top[1:-1] & top[:-2]))

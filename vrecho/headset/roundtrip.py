@@ -1,0 +1,189 @@
+"""The lock on the headset's own round trip: from a pulse's start in the loudspeaker's stream to
+its direct sound's arrival in the microphone's.
+
+The monitor's own direct sound is the strongest arrival that follows the dithered emissions at
+one fixed delay; the delay at which the last three pulses all have a strong arrival (the earliest
+such, the direct sound before its echoes) is the round trip. Once locked, each pulse's direct
+sound is looked for near it: small changes (clock drift) are followed, a jump seen in two pulses
+running is a step (an underrun), and two pulses without it unlock the monitor, which then
+searches again.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..signals import parabolic_peaks
+from .ranging import GUARD, POOL, Envelope, ProbeSchedule
+
+
+class RoundTrip:
+    """The lock on the monitor's own round trip: from a pulse's start in the loudspeaker's
+    stream to its direct sound's arrival in the microphone's (see the module's notes).
+
+    Parameters
+    ----------
+    schedule : ProbeSchedule
+        The monitor's pulses.
+    max_s : float
+        The longest round trip searched, in seconds.
+    guard : int
+        Once locked, the direct sound is looked for within this many samples of where it is due.
+
+    Attributes
+    ----------
+    delay : float or None
+        The round trip in samples (None while not locked), filtered over the pulses.
+    rate : float
+        How much it changes a pulse, in samples (the clocks' drift).
+    level : float
+        The direct sound's envelope peak, a running estimate (0 before the first lock).
+    searching_since : int
+        The sample from which the monitor has been searching (while not locked).
+    """
+
+    def __init__(self, schedule: ProbeSchedule, max_s: float, guard: int):
+        self.schedule = schedule
+        self.max = int(round(max_s * schedule.fs))
+        self.guard = int(guard)
+        self.delay: float | None = None
+        self.rate = 0.0
+        self.level = 0.0
+        self.searching_since = 0
+        self._misses = 0
+        self._pending: float | None = None
+        self._suspect = False
+
+    def unlock(self, now: int) -> None:
+        """Search again from sample ``now`` on.
+
+        Parameters
+        ----------
+        now : int
+        """
+        if self.delay is not None:
+            self.searching_since = now
+        self.delay, self._misses, self._pending = None, 0, None
+
+    def suspect(self) -> None:
+        """The stream said it lost samples (an underrun or overrun): one missing direct sound
+        unlocks."""
+        self._suspect = True
+
+    def search(self, env: Envelope) -> bool:
+        """Look for the round trip in what has arrived; lock on it when found.
+
+        Parameters
+        ----------
+        env : Envelope
+            The stream (its envelope computed as far as it can be).
+
+        Returns
+        -------
+        bool
+            Whether the monitor is now locked.
+        """
+        sch, pool, n_pulses = self.schedule, POOL, 3
+        done = env.done
+        span = self.max // pool + 2
+        first = sch.first_at_or_after(max(done - env.size + 2 * GUARD + pool, 0))
+        last = sch.first_at_or_after(done) - 1  # pulses whose direct sound may have arrived
+        ks = list(range(max(first, last - (self.max // sch.period) - n_pulses - 1), last + 1))
+        if len(ks) < n_pulses:
+            return False
+        starts = np.array([sch.emission(k) for k in ks])
+        rows = np.zeros((len(ks), span + 1), np.float32)
+        for i, e in enumerate(starts):  # pulse i's cells: cell c holds delays (e // pool + c) * pool - e on
+            g0 = e // pool
+            g1 = min(g0 + span + 1, done // pool)
+            if g1 > g0:
+                rows[i, :g1 - g0] = env.cells(g0, g1)
+        coarse = np.maximum(rows[:, :-1], rows[:, 1:])  # a delay's cell is c or c + 1, by the pulse's phase
+        # For each delay, the last three pulses whose arrival at that delay is in.
+        avail = np.searchsorted(starts, done - (np.arange(span) + 2) * pool, side="right")
+        if avail.max() < n_pulses:
+            return False
+        cols = np.arange(span)
+        score = np.full(span, np.inf, np.float32)
+        for i in range(1, n_pulses + 1):
+            score = np.minimum(score, coarse[np.clip(avail - i, 0, None), cols])
+        score[avail < n_pulses] = 0.0
+        top = float(score.max())
+        if top <= 0 or top < 10.0 * float(np.median(score)) + 1e-12:
+            return False
+        j = int(np.argmax(score >= 0.3 * top))  # the earliest strong one: the direct sound, before its echoes
+        while j + 1 < span and score[j + 1] > score[j]:
+            j += 1
+        delays, levels = [], []
+        for i in range(1, n_pulses + 1):
+            e = int(starts[avail[j] - i])
+            a = (e // pool + max(j - 1, 0)) * pool
+            seg = env.envelope(a, min((e // pool + j + 3) * pool, done))
+            p = int(np.argmax(seg))
+            delays.append(a + float(parabolic_peaks(seg, (p,))[0]) - e)
+            levels.append(float(seg[p]))
+        if max(delays) - min(delays) > 2.0 or max(levels) > 4.0 * min(levels):
+            return False
+        self.delay, self.level, self.rate = float(np.median(delays)), float(np.median(levels)), 0.0
+        self._misses, self._pending, self._suspect = 0, None, False
+        return True
+
+    def due(self, k: int) -> float:
+        """Where pulse ``k``'s direct sound is due, by the lock (locked only).
+
+        Parameters
+        ----------
+        k : int
+
+        Returns
+        -------
+        float
+            The fractional sample of its arrival.
+        """
+        return self.schedule.emission(k) + self.delay + self.rate
+
+    def follow(self, env: Envelope, k: int, now: int) -> float | None:
+        """Pulse ``k``'s direct sound, where it is due: its arrival, and the lock followed.
+
+        Parameters
+        ----------
+        env : Envelope
+            The stream, its envelope computed past the direct sound's guard.
+        k : int
+            The pulse.
+        now : int
+            The samples received (for :meth:`unlock`).
+
+        Returns
+        -------
+        float or None
+            The direct sound's arrival (fractional sample) for the pulse's echoes to be timed
+            against; None when it is not where it is due (the pulse is skipped; two such running,
+            or one after :meth:`suspect`, unlock).
+        """
+        e = self.schedule.emission(k)
+        due = self.due(k)
+        a = int(due) - self.guard
+        seg = env.envelope(a, int(due) + self.guard + 2)
+        p = int(np.argmax(seg))
+        peak = float(seg[p])
+        if peak < 0.3 * self.level:
+            self._misses += 1
+            if self._misses >= 2 or self._suspect:
+                self.unlock(now)
+            return None
+        at = a + float(parabolic_peaks(seg, (p,))[0])
+        self._misses, self._suspect = 0, False
+        self.level += 0.1 * (peak - self.level)
+        step = at - due
+        if abs(step) <= 1.5:  # the clocks' drift: followed (an alpha-beta filter of delay and its rate)
+            self.delay += self.rate + 0.3 * step
+            self.rate += 0.02 * step
+            self._pending = None
+            return e + self.delay
+        if self._pending is not None and abs(step - self._pending) <= 1.5:  # a step, seen twice
+            self.delay += step
+            self._pending = None
+            return at
+        self._pending = step  # once: a step, or a stray peak; this pulse is not trusted
+        return None
