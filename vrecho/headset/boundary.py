@@ -65,7 +65,7 @@ import numpy as np
 
 from ..errors import VrechoError
 from ..signals import SPEED_OF_SOUND
-from .ranging import GUARD, EchoFinder, Envelope, ProbeSchedule, clipped, ranging_probe, zero_runs
+from .ranging import GUARD, EchoFinder, Envelope, ProbeSchedule, clipped, echo_path, mic_geometry, ranging_probe, zero_runs
 from .roundtrip import RoundTrip
 from .tracks import Track
 from .view import look_all
@@ -142,9 +142,11 @@ class BoundaryMonitor:
         (default 0.35).
     max_range_m, min_range_m : float
         Echoes are looked for between these distances in metres (default 4 and 0.12).
-    mic_offset_m : float
-        Distance in metres from the loudspeaker to the microphone, as the headset's maker gives
-        it (PROTOCOL's device: 0.07 m, the default), across the wearer's forward axis.
+    mic_offset_m : float or sequence of 3 floats
+        Where the microphone is from the loudspeaker, as the headset's maker gives it: a
+        distance in metres across the wearer's forward axis (PROTOCOL's device: 0.07 m, the
+        default), or (forward, left, up) in metres; the part along the forward axis changes
+        the echo's path from a surface ahead.
     caution_ttc_s, caution_m, stop_m, hysteresis_m : float
         Alert thresholds, in seconds and metres (default 2 s, 1 m, 0.5 m, 0.1 m; see the
         module's notes); 0 < ``stop_m`` < ``caution_m``, ``caution_ttc_s`` > 0,
@@ -189,7 +191,7 @@ class BoundaryMonitor:
 
     def __init__(self, fs: int = 48000, *, period_s: float = 0.04, dither_s: float = 0.005, seed: int | None = None,
                  max_latency_s: float = 0.35, max_range_m: float = 4.0, min_range_m: float = 0.12,
-                 mic_offset_m: float = 0.07, caution_ttc_s: float = 2.0, caution_m: float = 1.0, stop_m: float = 0.5,
+                 mic_offset_m=0.07, caution_ttc_s: float = 2.0, caution_m: float = 1.0, stop_m: float = 0.5,
                  hysteresis_m: float = 0.1, approach_m: float = 0.12, miss_m: float = 0.4, threshold: float = 4.5,
                  on_alert=None):
         if fs not in (44100, 48000):
@@ -208,6 +210,7 @@ class BoundaryMonitor:
         self.schedule = ProbeSchedule(fs, probe, period_s=period_s, dither_s=dither_s, seed=seed)
         self.period = self.schedule.period
         self.max_range_m, self.min_range_m, self.mic_offset_m = max_range_m, min_range_m, mic_offset_m
+        self._mic = mic_geometry(mic_offset_m)  # (spacing, its forward part)
         self.caution_ttc_s, self.caution_m, self.stop_m = caution_ttc_s, caution_m, stop_m
         self.hysteresis_m, self.approach_m, self.threshold = hysteresis_m, approach_m, threshold
         self.miss_m = miss_m
@@ -377,7 +380,7 @@ class BoundaryMonitor:
         """The round trip the monitor is locked on, speaker write to microphone read, in seconds
         (the direct sound's flight over ``mic_offset_m`` taken out), or None while it is not."""
         d = self._lock.delay
-        return None if d is None else max(d / self.fs - self.mic_offset_m / SPEED_OF_SOUND, 0.0)
+        return None if d is None else max(d / self.fs - self._mic[0] / SPEED_OF_SOUND, 0.0)
 
     def _stale_s(self, t_pulse: float) -> float:
         """Seconds from a pulse's emission to now, as the monitor must reckon them: the sooner
@@ -515,8 +518,7 @@ class BoundaryMonitor:
             if t - tr.approached_at <= 1.0 and (tr.ahead or (tr.ahead is None and len(tr.times) >= 7)):
                 d = tr.predict(t)  # (an undecided track: one echo more may decide it)
                 closing = max(-(tr.speed or 0.0), 0.0)
-                s = self.mic_offset_m
-                lag = (np.sqrt((2 * max(d, 0.0)) ** 2 + s ** 2) - s) / SPEED_OF_SOUND * self.fs
+                lag = echo_path(max(d, 0.0), *self._mic) / SPEED_OF_SOUND * self.fs
                 d_now = d - closing * max((due + lag + len(self.probe)) / self.fs - t, 0.0)
                 reach = closing * period_s + 0.05
                 thresholds = (self.stop_m, self.stop_m + h) + ((self.caution_m, self.caution_m + h) if tr.ahead else ())
@@ -581,13 +583,15 @@ class BoundaryMonitor:
                                if len(tr.times) >= 10 and tr.speed is not None and abs(tr.speed) < 0.25
                                and tr.d_hat >= self.miss_m and tr.jitter < 0.015 ** 2]
         for tr in updated:
-            tr.ahead = None
+            was, tr.ahead = tr.ahead, None
             closing = -(tr.speed or 0.0)
             soon = tr.d_hat < self.caution_m + 0.5 or (closing > 0.05 and tr.d_hat / closing < self.caution_ttc_s + 0.75)
             if t - tr.approached_at <= 1.0 and soon:  # the fit only where an alert may come within half a second or so
                 tr.ahead = tr.in_the_way(self.miss_m)
                 if tr.ahead and tr.explained_by(still):
                     tr.ahead = False
+                elif tr.ahead is None and was:  # once in the way, until the fit says it passes by
+                    tr.ahead = True
         self._tracks = [tr for tr in self._tracks if t - tr.times[-1] <= 0.3]
         if len(self._tracks) > 32:  # clutter: keep the surfaces followed longest, then the nearest
             self._tracks = sorted(self._tracks, key=lambda tr: (-min(len(tr.times), 8), tr.dists[-1]))[:32]

@@ -386,14 +386,15 @@ class EchoFinder:
         How far above the envelope's median an echo must rise (a factor).
     min_range_m, max_range_m : float
         The distances echoes are looked for between, in metres.
-    mic_offset_m : float
-        Loudspeaker to microphone, in metres.
+    mic_offset_m : float or sequence of 3 floats
+        Loudspeaker to microphone (:func:`mic_geometry`).
     """
 
     def __init__(self, probe: np.ndarray, fs: int, window: int, *, threshold: float, min_range_m: float,
-                 max_range_m: float, mic_offset_m: float):
+                 max_range_m: float, mic_offset_m):
         self.probe, self.fs, self.window = probe, fs, window
-        self.threshold, self.min_range_m, self.max_range_m, self.mic_offset_m = threshold, min_range_m, max_range_m, mic_offset_m
+        self.threshold, self.min_range_m, self.max_range_m = threshold, min_range_m, max_range_m
+        self._mic = mic_geometry(mic_offset_m)
         self._clipped_floors: dict[int, np.ndarray] = {}
         lag = np.arange(window + len(probe), dtype=float)  # the direct sound's sidelobes by lag
         self._sidelobe = 10 ** (-(32 + 6 * np.log2(np.maximum(lag, 1) / (0.5 * len(probe)) + 1)) / 20)
@@ -464,11 +465,98 @@ class EchoFinder:
         peaks = peaks[span[peaks] > peak_direct * sidelobe[peaks]]
         if not len(peaks):
             return []
-        s = self.mic_offset_m
-        path = SPEED_OF_SOUND * (parabolic_peaks(span, peaks) + d0 - ref) / self.fs + s
-        d = 0.5 * np.sqrt(np.maximum(path ** 2 - s ** 2, 0.0))
-        ok = (path > s) & (d >= self.min_range_m) & (d <= self.max_range_m)
-        return list(zip(d[ok].tolist(), (span[peaks][ok] / peak_direct).tolist()))
+        excess = SPEED_OF_SOUND * (parabolic_peaks(span, peaks) + d0 - ref) / self.fs
+        d = echo_distance(excess, *self._mic)
+        ok = (excess > 0) & (d >= self.min_range_m) & (d <= self.max_range_m)
+        # One echo per surface: an echo's envelope has sidelobes some 5 samples either side (2 cm
+        # of distance) that a track could follow instead; peaks closer than 3 cm keep the strongest.
+        out = []
+        for dist, strength in zip(d[ok].tolist(), (span[peaks][ok] / peak_direct).tolist()):
+            if out and dist - out[-1][0] < 0.03:
+                if strength > out[-1][1]:
+                    out[-1] = (dist, strength)
+                continue
+            out.append((dist, strength))
+        return out
+
+
+def mic_geometry(mic_offset_m) -> tuple[float, float]:
+    """The loudspeaker-to-microphone spacing and its part along the wearer's forward axis.
+
+    Parameters
+    ----------
+    mic_offset_m : float or sequence of 3 floats
+        A spacing in metres across the forward axis, or the microphone's place from the
+        loudspeaker, (forward, left, up) in metres, as the headset's maker gives it.
+
+    Returns
+    -------
+    spacing, forward : float
+        In metres.
+
+    Raises
+    ------
+    VrechoError
+        For a spacing that is not 0 to 0.5 m, or not three finite numbers.
+
+    Examples
+    --------
+    >>> mic_geometry(0.07), mic_geometry((0.03, 0.0, 0.04))
+    ((0.07, 0.0), (0.05, 0.03))
+    """
+    o = np.atleast_1d(np.asarray(mic_offset_m, float))
+    if o.shape not in ((1,), (3,)) or not np.all(np.isfinite(o)):
+        raise VrechoError(f"mic_offset_m: expected metres, or (forward, left, up) in metres, got {mic_offset_m!r}")
+    s = float(np.linalg.norm(o))
+    if not 0.0 <= s <= 0.5:
+        raise VrechoError(f"mic_offset_m: expected a spacing of 0 to 0.5 m, got {s:.3f} m")
+    return round(s, 12), round(float(o[0]) if o.shape == (3,) else 0.0, 12)
+
+
+def echo_path(d, spacing: float, forward: float):
+    """The echo path's excess over the direct path, for a surface ``d`` straight ahead.
+
+    The image of the loudspeaker lies ``2 d`` ahead; the microphone ``forward`` ahead of the
+    loudspeaker and ``spacing`` from it: the path is sqrt(4 d^2 - 4 d forward + spacing^2).
+
+    Parameters
+    ----------
+    d : float or numpy.ndarray
+        Distance to the surface's plane, metres.
+    spacing, forward : float
+        :func:`mic_geometry`'s.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        Metres, the path less the direct path (``spacing``).
+    """
+    return np.sqrt(4 * d * d - 4 * d * forward + spacing * spacing) - spacing
+
+
+def echo_distance(excess, spacing: float, forward: float):
+    """:func:`echo_path` inverted: the distance to the surface ahead whose echo came ``excess``
+    metres of path after the direct sound.
+
+    Parameters
+    ----------
+    excess : float or numpy.ndarray
+        Metres of path after the direct sound.
+    spacing, forward : float
+        :func:`mic_geometry`'s.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        Metres.
+
+    Examples
+    --------
+    >>> round(float(echo_distance(echo_path(1.2, 0.05, 0.03), 0.05, 0.03)), 9)
+    1.2
+    """
+    path = excess + spacing
+    return 0.5 * (forward + np.sqrt(np.maximum(forward * forward - spacing * spacing + path * path, 0.0)))
 
 
 def zero_runs(x: np.ndarray, min_len: int) -> np.ndarray:

@@ -1,5 +1,5 @@
-"""Random scenes as PROTOCOL.md allows them, device poses facing a discontinuity, and the
-walkthrough a person scanning a room would follow.
+"""Random scenes as PROTOCOL.md allows them, device poses facing a discontinuity, the
+walkthrough a person scanning a room would follow, and furniture for a room.
 """
 
 from __future__ import annotations
@@ -8,6 +8,8 @@ import numpy as np
 
 from ..device import MIC_ABOVE_EMITTER_M, DevicePose
 from ..errors import VrechoError, check_number
+from ..furniture import Furniture
+from ..geometry import distance_to_polygon, point_in_polygon
 from ..materials import BANDS_HZ, HEAVY_GLASS, MIRROR, WINDOW_GLASS, Material
 from ..camera import CameraPath
 from ..scene import DEPTH_RANGE_M, KINDS, MAX_INCIDENCE_DEG, Discontinuity, Room, Scene, SoundSource
@@ -349,3 +351,84 @@ def _stand(room: Room, w: int, centre: np.ndarray, width: float, z0: float, z1: 
     if best is None:  # no room to stand 0.4 m inside: as far out as the room allows
         return np.r_[(centre - 0.6 * normal)[:2], np.clip(height_m, *reach_m)], 0.6
     return best[1], best[2]
+
+
+FURNITURE_KINDS = ("table", "sofa", "shelf", "door leaf")
+"""What :func:`random_furniture` draws."""
+
+_WOOD = Material("wood", (0.15, 0.11, 0.1, 0.07, 0.06, 0.07, 0.07))
+_FABRIC = Material("fabric", (0.1, 0.2, 0.45, 0.6, 0.65, 0.6, 0.6), 0.3)
+
+
+def random_furniture(room: Room, rng: np.random.Generator, n: int, *, kinds=FURNITURE_KINDS,
+                     keep_clear: list | None = None) -> list[Furniture]:
+    """Up to ``n`` pieces of furniture placed in a room without overlapping.
+
+    Tables (a top 0.7 to 0.76 m up, its legs left out), sofas (0.8 to 0.9 m high, fabric), shelves
+    (1.6 to 2 m high, 3 to 8 cm off a wall) and open door leaves (4 cm thick, hinged at a wall,
+    open 30 to 90 degrees).
+
+    Parameters
+    ----------
+    room : Room
+        The room.
+    rng : numpy.random.Generator
+        The draw.
+    n : int
+        How many to try for.
+    kinds : tuple of str
+        Which of :data:`FURNITURE_KINDS` to draw from.
+    keep_clear : list of (numpy.ndarray, float), optional
+        Discs ([x, y], radius in metres) to leave empty (where people walk).
+
+    Returns
+    -------
+    list of vrecho.furniture.Furniture
+        Those that found a place (50 tries each).
+    """
+    placed: list[Furniture] = []
+    discs = list(keep_clear or [])
+    fp, lengths = room.footprint, room.wall_lengths
+    for _ in range(n):
+        kind = str(rng.choice(kinds))
+        for _ in range(50):
+            w = int(rng.integers(len(fp)))
+            origin, u, normal = room.wall_frame(w)
+            yaw = float(np.degrees(np.arctan2(u[1], u[0])))
+            if kind == "table":
+                size, z0, material = (rng.uniform(0.8, 1.8), rng.uniform(0.6, 1.0), 0.04), rng.uniform(0.66, 0.72), _WOOD
+                centre = np.array([rng.uniform(fp[:, 0].min(), fp[:, 0].max()), rng.uniform(fp[:, 1].min(), fp[:, 1].max())])
+                yaw = float(rng.uniform(0, 180))
+            else:
+                if kind == "sofa":
+                    size, z0, material, gap = (rng.uniform(1.6, 2.2), rng.uniform(0.8, 0.95), rng.uniform(0.8, 0.9)), 0.0, _FABRIC, 0.05
+                elif kind == "shelf":
+                    size, z0, material, gap = (rng.uniform(0.6, 1.2), rng.uniform(0.3, 0.4), rng.uniform(1.6, 2.0)), 0.0, _WOOD, \
+                        rng.uniform(0.03, 0.08)
+                else:  # a door leaf, hinged near the wall and swung open into the room
+                    size, z0, material = (rng.uniform(0.8, 0.9), 0.04, rng.uniform(1.95, 2.0)), 0.01, _WOOD
+                if lengths[w] < size[0] + 0.3:
+                    continue
+                along = rng.uniform(size[0] / 2 + 0.1, lengths[w] - size[0] / 2 - 0.1)
+                if kind == "door leaf":
+                    swing = np.radians(rng.uniform(30, 90))
+                    hinge = origin[:2] + (along - size[0] / 2) * u[:2] - 0.03 * normal[:2]
+                    direction = np.cos(swing) * u[:2] - np.sin(swing) * normal[:2]
+                    centre = hinge + direction * size[0] / 2
+                    yaw = float(np.degrees(np.arctan2(direction[1], direction[0])))
+                else:
+                    centre = origin[:2] + along * u[:2] - (gap + size[1] / 2) * normal[:2]
+            piece = Furniture(kind, tuple(np.round(centre, 3)), tuple(np.round(size, 3)), z0=round(float(z0), 3),
+                              yaw_deg=round(yaw, 2), material=material)
+            corners = piece.footprint()
+            radius = 0.5 * float(np.hypot(*piece.size[:2]))
+            if not point_in_polygon(corners, fp).all() or (distance_to_polygon(corners, fp).min() < 0.02 and kind == "table"):
+                continue
+            if piece.top_m > room.height_m - 0.1:
+                continue
+            if any(np.linalg.norm(piece.center - np.asarray(c)) < radius + r + 0.05 for c, r in discs):
+                continue
+            placed.append(piece)
+            discs.append((np.asarray(piece.center), radius))
+            break
+    return placed

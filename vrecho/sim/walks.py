@@ -7,7 +7,8 @@ Two steps, so that one walk's room is simulated once and heard through many stre
 - :func:`walk_responses`: the room's impulse response from the headset's loudspeaker to its
   microphone at each pulse (pyroomacoustics' image sources up to second order: the specular
   echoes that ranging is about; glass, mirrors, openings and furniture as their own patches).
-  The walk bobs the head (2 cm at 1.8 Hz) and sways it (3 degrees at 0.9 Hz). The headset
+  The walk gets under way at 3 m/s^2, bobs the head (2 cm at 1.8 Hz) and sways it (3 degrees
+  at 0.9 Hz). The headset
   (:class:`Headset`) places its microphone 1 to 15 cm from the loudspeaker in any direction and
   points its loudspeaker along any axis, omnidirectional to cardioid.
 - :func:`record_walk`: those responses played through an audio stream (:class:`AudioLink`: a
@@ -45,6 +46,15 @@ HEADSET_CAMERA = Camera(width=320, height=240, fov_deg=100.0)
 
 AMBIENT_KINDS = ("speech", "music", "tv", "fan")
 """Ambient sounds a walk may hear (:func:`record_walk`)."""
+
+ACCELERATION_MPS2 = 3.0
+"""How fast a walk gets under way (a brisk start: 2 m/s within two thirds of a second)."""
+
+
+def _walked(t: float, speed: float) -> float:
+    """Metres walked ``t`` seconds after setting off, speeding up at :data:`ACCELERATION_MPS2`."""
+    ramp = speed / ACCELERATION_MPS2
+    return 0.5 * ACCELERATION_MPS2 * t * t if t < ramp else speed * (t - 0.5 * ramp)
 
 
 @dataclass(frozen=True)
@@ -287,7 +297,7 @@ def walk_responses(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps:
     dist0 = abs((start - p0) @ normal)
     along = float(heading @ (-np.sign((start - p0) @ normal) * normal))  # > 0: toward the plane
     length = (dist0 - stop_m) / along if along > 0.05 else np.linalg.norm(goal - start)
-    duration = lead_s + length / speed_mps
+    duration = lead_s + length / speed_mps + 0.5 * speed_mps / ACCELERATION_MPS2
     n_pulses = schedule.first_at_or_after(int(duration * fs))
     bob_phase, sway_phase = rng.uniform(0, 2 * np.pi, 2)
     lag = pra.constants.get("frac_delay_length") // 2
@@ -298,7 +308,7 @@ def walk_responses(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps:
                         np.zeros((n_pulses, 3)), 0.0, headset, scene)
     for k in range(n_pulses):
         t = written[k] / fs
-        s = max(0.0, t - lead_s) * speed_mps
+        s = _walked(max(0.0, t - lead_s), speed_mps)
         pos = start + heading * min(s, length) + [0.0, 0.0, 0.02 * np.sin(2 * np.pi * 1.8 * t + bob_phase)]
         yaw = np.radians(3.0) * np.sin(2 * np.pi * 0.9 * t + sway_phase)
         c, sn = np.cos(yaw), np.sin(yaw)
@@ -355,7 +365,9 @@ def other_headsets(walk: WalkResponses, n: int, rng: np.random.Generator) -> np.
             where = walk.position_m[0] + rng.uniform(0.8, 3.0) * np.array([np.cos(angle), np.sin(angle), 0.0])
             where[2] = rng.uniform(1.45, 1.85)
             drift = rng.uniform(-0.3, 0.3) * np.array([np.cos(angle + 1.5), np.sin(angle + 1.5), 0.0])
-            if room.contains(np.array([where, where + drift * 5.0]), margin_m=0.3).all():
+            path = where + np.linspace(0.0, total / fs, 8)[:, None] * drift
+            if room.contains(path, margin_m=0.3).all() and not any(f.contains(path, margin_m=0.2).any()
+                                                                   for f in walk.scene.furniture):
                 break
         else:
             continue
