@@ -386,7 +386,7 @@ def held_out_room(args) -> list[dict]:
             pos = pos + [0, 0, 0.02 * np.sin(2 * np.pi * 1.8 * written[j] / fs)]
             h = rir_generator.generate(c=343.0, fs=fs, r=[pos + [0, 0, 0.07]], s=pos, L=dims, reverberation_time=rt60,
                                        nsample=int(0.06 * fs), order=2)[:, 0]
-            seg = np.convolve(h, sch.probe)
+            seg = np.convolve(h, sch.probe(j))
             e = int(round(arrival[j]))
             x[e:e + len(seg)] += seg
             dist[j] = dims[0] - pos[0]

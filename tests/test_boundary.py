@@ -92,7 +92,7 @@ def test_walking_into_glass_raises_caution_then_stop(glass):
     # Stop comes no later than the block in which the echo of the first pulse sent from within
     # 0.5 m ends (sooner when the walk so far says the wearer is there by now).
     k = int(np.argmax(glass.distance_m < 0.5))
-    echo_end = glass.arrival[k] / FS + echo_round_trip_s(glass.distance_m[k]) + len(mon.probe) / FS
+    echo_end = glass.arrival[k] / FS + echo_round_trip_s(glass.distance_m[k]) + mon.schedule.length / FS
     assert end / FS < echo_end + 480 / FS
     # Distances to a centimetre: against the truth at the pulse that measured them.
     err = [abs(a.distance_m - glass.distance_m[_pulse(glass, a)])
@@ -125,9 +125,13 @@ def test_the_speaker_gets_the_probe_on_the_same_clock():
         block = np.zeros(n)
         mon.process(np.full(n, 1e-4), block)
         out = np.r_[out, block]
-    probe, e0, e1 = mon.probe, mon.schedule.emission(0), mon.schedule.emission(1)
-    assert np.allclose(out[e0:e0 + len(probe)], probe) and np.allclose(out[e1:e1 + len(probe)], probe)
-    assert np.all(out[:e0] == 0) and np.all(out[e0 + len(probe):e1] == 0)
+    sch = mon.schedule
+    e0, e1, m = sch.emission(0), sch.emission(1), sch.length
+    assert np.allclose(out[e0:e0 + m], sch.probe(0)) and np.allclose(out[e1:e1 + m], sch.probe(1))
+    assert np.all(out[:e0] == 0) and np.all(out[e0 + m:e1] == 0)
+    # Each pulse plays one of two codes (a chirp up or down), drawn from the seed.
+    codes = [sch.code(k) for k in range(400)]
+    assert set(codes) == {0, 1} and max(np.bincount(codes)) < 230
     # Pulses leave a period apart plus a dither of up to 5 ms, drawn from the monitor's seed.
     gaps = np.diff([mon.schedule.emission(k) for k in range(200)])
     assert gaps.min() >= mon.period - 0.005 * 44100 and gaps.max() <= mon.period + 0.005 * 44100 and gaps.std() > 20
@@ -302,4 +306,4 @@ def test_the_callback_is_sounddevices_and_on_alert_hears_each_change(glass_room)
     played = np.concatenate(played)
     assert np.array_equal(played[:, 0], played[:, 1])
     e = mon.schedule.emission(3)
-    assert np.allclose(played[e:e + len(mon.probe), 0], mon.probe, atol=1e-6)
+    assert np.allclose(played[e:e + mon.schedule.length, 0], mon.schedule.probe(3), atol=1e-6)

@@ -11,7 +11,7 @@ Nothing here imports torch until a camera frame is classified: the audio path st
 """
 
 from .boundary import Alert, BoundaryMonitor
-from .ranging import ProbeSchedule, ranging_probe
+from .ranging import ProbeSchedule, probe_codes, ranging_probe
 from .view import SurfaceView, load_model, look, look_all, pane_crop
 
-__all__ = ["Alert", "BoundaryMonitor", "ProbeSchedule", "SurfaceView", "load_model", "look", "look_all", "pane_crop", "ranging_probe"]
+__all__ = ["Alert", "BoundaryMonitor", "ProbeSchedule", "probe_codes", "SurfaceView", "load_model", "look", "look_all", "pane_crop", "ranging_probe"]

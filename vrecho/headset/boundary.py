@@ -2,9 +2,10 @@
 
 :class:`BoundaryMonitor` has the shape of a full-duplex audio callback: each call gets the
 microphone's block and fills the loudspeaker's block of the same length (:meth:`~BoundaryMonitor.callback`
-is sounddevice's ``Stream(callback=...)`` itself). It plays a ranging probe
-(:func:`~.ranging.ranging_probe`, a 5 ms linear chirp from 4 to 20 kHz, Tukey-windowed, every 40
-ms plus a dither of up to 5 ms drawn from its own seed: a faint tick), and:
+is sounddevice's ``Stream(callback=...)`` itself). It plays a ranging probe every 40 ms plus a
+dither of up to 5 ms: an 8 ms chirp, Tukey-windowed, up or down through 4-12 or 12-20 kHz (four
+codes, :data:`~.ranging.CODES_HZ`), the dither and the code of each pulse drawn from the
+monitor's own seed (a faint tick), and:
 
 0. **Its own round trip.** A real stream hands the loudspeaker's sound back 0 to 300 ms later
    (more on ordinary desktop and phone audio), unknown, and changes it by a block after an
@@ -12,8 +13,9 @@ ms plus a dither of up to 5 ms drawn from its own seed: a faint tick), and:
    dithered pulses arrive (:mod:`.roundtrip`), reports it (``alert.latency_s``), follows the
    clocks' drift and the steps, and while it is not locked says "unlocked" and raises no alarm
    ("no_direct_sound" after a second: a muted loudspeaker). Another headset's pings, dithered by
-   its own seed, land somewhere else every pulse: no track follows them.
-1. **Ranging.** The microphone's stream is correlated with the probe as it arrives (the
+   its own seed, land somewhere else every pulse, and three times in four in another code, 19
+   to 40 dB down: no track follows them.
+1. **Ranging.** The microphone's stream is correlated with each pulse's code as it arrives (the
    envelope, :class:`~.ranging.Envelope`); each pulse's own direct sound is its time reference;
    echo peaks above the noise floor and the direct sound's sidelobes are timed to a fraction of a
    sample (:class:`~.ranging.EchoFinder`). A surface straight ahead at ``d`` returns the echo path
@@ -65,7 +67,7 @@ import numpy as np
 
 from ..errors import VrechoError
 from ..signals import SPEED_OF_SOUND
-from .ranging import GUARD, EchoFinder, Envelope, ProbeSchedule, clipped, echo_path, mic_geometry, ranging_probe, zero_runs
+from .ranging import GUARD, EchoFinder, Envelope, ProbeSchedule, clipped, echo_path, mic_geometry, probe_codes, zero_runs
 from .roundtrip import RoundTrip
 from .tracks import Track
 from .view import look_all
@@ -170,7 +172,9 @@ class BoundaryMonitor:
     alert : Alert
         The alert returned for the last block.
     schedule : ProbeSchedule
-        When the probe is played.
+        When the probe is played, and which code.
+    probes : tuple of numpy.ndarray
+        The codes (:func:`~.ranging.probe_codes`).
 
     Raises
     ------
@@ -196,8 +200,9 @@ class BoundaryMonitor:
                  on_alert=None):
         if fs not in (44100, 48000):
             raise VrechoError(f"fs: expected 44100 or 48000 Hz, got {fs!r}")
-        probe = ranging_probe(fs)
-        least = 2 * max_range_m / SPEED_OF_SOUND + (len(probe) + 2 * GUARD) / fs + dither_s + 0.001
+        probes = probe_codes(fs)
+        m = len(probes[0])
+        least = 2 * max_range_m / SPEED_OF_SOUND + (m + 2 * GUARD) / fs + dither_s + 0.001
         if not least < period_s <= 0.5 or dither_s < 0:
             raise VrechoError(f"period_s: must exceed the round trip to max_range_m, the probe and the dither "
                               f"({least:.3f} s) and be at most 0.5 s, got {period_s}")
@@ -206,8 +211,8 @@ class BoundaryMonitor:
         if not 0 <= max_latency_s <= 2.0:
             raise VrechoError(f"max_latency_s: expected 0 to 2 s, got {max_latency_s}")
         self.fs = fs
-        self.probe = probe
-        self.schedule = ProbeSchedule(fs, probe, period_s=period_s, dither_s=dither_s, seed=seed)
+        self.probes = probes
+        self.schedule = ProbeSchedule(fs, probes, period_s=period_s, dither_s=dither_s, seed=seed)
         self.period = self.schedule.period
         self.max_range_m, self.min_range_m, self.mic_offset_m = max_range_m, min_range_m, mic_offset_m
         self._mic = mic_geometry(mic_offset_m)  # (spacing, its forward part)
@@ -216,10 +221,10 @@ class BoundaryMonitor:
         self.miss_m = miss_m
         self.on_alert = on_alert
         # A pulse's window: from its direct sound to the echoes from max_range_m, and the probe.
-        self.window = int((2 * max_range_m / SPEED_OF_SOUND) * fs) + len(probe) + 2
+        self.window = int((2 * max_range_m / SPEED_OF_SOUND) * fs) + m + 2
         self._lock = RoundTrip(self.schedule, max_latency_s, int(0.002 * fs))
         size = 1 << int(np.ceil(np.log2(self._lock.max + 4 * (self.period + self.schedule.dither) + self.window)))
-        self._env = Envelope(probe, size)
+        self._env = Envelope(probes, size)
         self._now = 0  # samples received so far (= samples played: one clock)
         self._judged = 0  # samples received at the last judgement
         self._searched = -self.period  # samples received at the last search for the round trip
@@ -232,7 +237,7 @@ class BoundaryMonitor:
         self._ends_for, self._ends = -1, []  # the pulse whose echoes' lags _echo_ends gave, and those lags
         self._still: list[float] = []  # distances of the surfaces that stay put, at the last commit
         self._level = "clear"
-        self._echoes = EchoFinder(probe, fs, self.window, threshold=threshold, min_range_m=min_range_m,
+        self._echoes = EchoFinder(probes, fs, self.window, threshold=threshold, min_range_m=min_range_m,
                                   max_range_m=max_range_m, mic_offset_m=mic_offset_m)
 
     # -- The callback ------------------------------------------------------------------------------
@@ -456,6 +461,7 @@ class BoundaryMonitor:
             env.searching = False
             held = env.n - env.size + 2 * GUARD + lock.guard - int(lock.delay)  # pulses whose direct sound is still held
             self._next = max(self._next, self.schedule.first_at_or_after(max(held, 0)))
+            env.redo(int(lock.due(self._next)) - lock.guard - 4)  # the search's envelope was all codes': each its own now
         sch = self.schedule
         changed = False
         while lock.delay is not None:
@@ -465,7 +471,7 @@ class BoundaryMonitor:
             if env.ready() < end:
                 break
             env.skip(int(due) - lock.guard - 4)  # locked: only the pulses' windows are looked at
-            env.compute(end)
+            env.compute(end, code=sch.code(k))
             ref = lock.follow(env, k, self._now)
             if lock.delay is None:  # lost: no alarm, and search again from the next block
                 self._searched = -self.period
@@ -473,7 +479,7 @@ class BoundaryMonitor:
                 self._level, self._verdict_track, self._verdict = "clear", None, Alert(flags=("unlocked",))
                 return
             if ref is not None:
-                echoes = self._echoes.find(self._env, ref, end, clipped=self._clipped_at > ref - 8192)
+                echoes = self._echoes.find(self._env, ref, end, code=sch.code(k), clipped=self._clipped_at > ref - 8192)
                 if echoes is not None:
                     self._commit(sch.emission(k) / self.fs, echoes)
                     changed = True
@@ -483,18 +489,18 @@ class BoundaryMonitor:
         partial = None
         due = lock.due(k)
         ready = env.ready()
-        if ready > due + len(self.probe):
+        if ready > due + self._env.m:
             # A surface in the way near a threshold: its echo of this pulse may cross it. Looked
             # for in the block in which that echo ends (as predicted, give or take 1.5 ms, a
             # quarter metre), not in every block.
             margin = 0.0015 * self.fs
-            judged = self._judged - len(self.probe) - GUARD + 1  # the envelope ready at the last judgement
+            judged = self._judged - self._env.m - GUARD + 1  # the envelope ready at the last judgement
             if self._ends_for != k:  # asked once a pulse: the tracks change only when a pulse is committed
                 self._ends_for, self._ends = k, self._echo_ends(k)
             if any(judged < due + lag + margin and ready >= due + lag - margin for lag in self._ends):
                 env.skip(int(due) - lock.guard - 4)
-                env.compute(ready)
-                partial = self._echoes.find(env, due, ready, clipped=self._clipped_at > due - 8192)
+                env.compute(ready, code=sch.code(k))
+                partial = self._echoes.find(env, due, ready, code=sch.code(k), clipped=self._clipped_at > due - 8192)
         # The judgement changes with the tracks, a pulse still arriving, when a surface's approach
         # grows a second old, or as the wearer walks on toward a threshold: otherwise it stands.
         t_now = self._now / self.fs
@@ -515,11 +521,12 @@ class BoundaryMonitor:
         h = self.hysteresis_m
         period_s = self.period / self.fs
         for tr in self._tracks:
-            if t - tr.approached_at <= 1.0 and (tr.ahead or (tr.ahead is None and len(tr.times) >= 7)):
+            if t - tr.approached_at <= 1.0 and (tr.ahead or (tr.ahead is None and len(tr.times) >= 7
+                                                             and tr.confirmed)):
                 d = tr.predict(t)  # (an undecided track: one echo more may decide it)
                 closing = max(-(tr.speed or 0.0), 0.0)
                 lag = echo_path(max(d, 0.0), *self._mic) / SPEED_OF_SOUND * self.fs
-                d_now = d - closing * max((due + lag + len(self.probe)) / self.fs - t, 0.0)
+                d_now = d - closing * max((due + lag + self._env.m) / self.fs - t, 0.0)
                 reach = closing * period_s + 0.05
                 thresholds = (self.stop_m, self.stop_m + h) + ((self.caution_m, self.caution_m + h) if tr.ahead else ())
                 near = any(abs(d_now - thr) < reach for thr in thresholds)
@@ -570,27 +577,33 @@ class BoundaryMonitor:
     def _commit(self, t: float, echoes) -> None:
         """Add the echoes of the pulse emitted at ``t`` (seconds) to the tracks."""
         updated = []
+        clutter = len(echoes) / (self.max_range_m - self.min_range_m)  # peaks per metre in this pulse
         for tr, d, strength in self._associate(t, echoes):
             if tr is None:
                 tr = Track()
                 self._tracks.append(tr)
-            tr.update(t, d, strength)
+            tr.update(t, d, strength, clutter_per_m=clutter)
             if tr.closed_in(0.8) >= self.approach_m:
                 tr.approached_at = t
             updated.append(tr)
+        for tr in self._tracks:
+            if tr.times[-1] != t:
+                tr.missed()
         # Only a surface being approached can need an alert: the fits are for those.
         still = self._still = [tr.d_hat for tr in self._tracks
                                if len(tr.times) >= 10 and tr.speed is not None and abs(tr.speed) < 0.25
-                               and tr.d_hat >= self.miss_m and tr.jitter < 0.015 ** 2]
+                               and tr.d_hat >= self.miss_m and tr.confirmed]
         for tr in updated:
             was, tr.ahead = tr.ahead, None
             closing = -(tr.speed or 0.0)
             soon = tr.d_hat < self.caution_m + 0.5 or (closing > 0.05 and tr.d_hat / closing < self.caution_ttc_s + 0.75)
-            if t - tr.approached_at <= 1.0 and soon:  # the fit only where an alert may come within half a second or so
+            # The fit only where an alert may come within half a second or so, and only for a
+            # surface (stray peaks, another headset's pings, can make a track too: its score).
+            if t - tr.approached_at <= 1.0 and soon and tr.confirmed:
                 tr.ahead = tr.in_the_way(self.miss_m)
                 if tr.ahead and tr.explained_by(still):
                     tr.ahead = False
-                elif tr.ahead is None and was:  # once in the way, until the fit says it passes by
+                elif tr.ahead is None and was:  # once in the way, until the fit says it passes by (or not a surface)
                     tr.ahead = True
         self._tracks = [tr for tr in self._tracks if t - tr.times[-1] <= 0.3]
         if len(self._tracks) > 32:  # clutter: keep the surfaces followed longest, then the nearest
@@ -615,24 +628,30 @@ class BoundaryMonitor:
         provisional = {}
         if partial:  # echoes of the pulse still arriving: the alert may not wait for the window's end
             for tr, d, _ in self._associate(t_pulse, partial):
-                if tr is not None:
+                if tr is not None and tr.confirmed:  # (a surface, not stray peaks: see _commit)
                     provisional[id(tr)] = d
         self._oldest_approach = np.inf
         self._judge_at = np.inf
         for tr in self._tracks:
-            if t_now - tr.approached_at > 1.0 or tr.ahead is False:
+            if tr.ahead is False:
                 continue
-            if tr.ahead is None and not (id(tr) in provisional
-                                         and tr.ahead_with(t_pulse, provisional[id(tr)], self.miss_m, self._still)):
-                continue  # not known to be in the way: asked again with the echo still arriving, if any
-            self._oldest_approach = min(self._oldest_approach, tr.approached_at)
             v = tr.speed
             d = provisional.get(id(tr), tr.dists[-1])
             at = t_pulse if id(tr) in provisional else tr.times[-1]
             closing = -v if v is not None else 0.0
             d_now = d - max(closing, 0.0) * self._stale_s(at)  # where the wearer may be by now
             ttc = d_now / closing if closing > 0.05 else np.inf
-            level = self._level_for(d_now, ttc)
+            if t_now - tr.approached_at <= 1.0 and (tr.ahead or (
+                    id(tr) in provisional and tr.ahead_with(t_pulse, provisional[id(tr)], self.miss_m, self._still))):
+                self._oldest_approach = min(self._oldest_approach, tr.approached_at)
+                level = self._level_for(d_now, ttc)
+            elif (len(tr.times) >= 5 and closing >= 0.5 and at - tr.times[-5] < 0.25 and tr.confirmed
+                  and d_now < self.caution_m and ttc < 0.75):
+                # Not yet known to be in the way (the fit needs a third of a second of steady walking),
+                # but near, nearing fast and steadily: a surface rushed at from close by still warns.
+                level = "caution"
+            else:
+                continue  # not known to be in the way (asked again with the echo still arriving, if any)
             if closing > 0.05:  # when, walking on, it reaches a threshold it has not reached
                 soon = [(d_now - thr) / closing for thr in (self.stop_m, self.caution_m) if d_now > thr]
                 soon.append(ttc - self.caution_ttc_s if ttc > self.caution_ttc_s else np.inf)

@@ -37,8 +37,8 @@ main lobe is some 3 samples wide)."""
 
 
 def ranging_probe(fs: int, *, duration_s: float = 0.005, f0: float = 4000.0, f1: float = 20000.0) -> np.ndarray:
-    """The ranging probe: a linear chirp from ``f0`` to ``f1`` Hz over ``duration_s``, Tukey
-    window (25 %), peak 0.5.
+    """A ranging probe: a linear chirp from ``f0`` to ``f1`` Hz (up or down) over ``duration_s``,
+    Tukey window (25 %), peak 0.5.
 
     Parameters
     ----------
@@ -56,7 +56,7 @@ def ranging_probe(fs: int, *, duration_s: float = 0.005, f0: float = 4000.0, f1:
     Raises
     ------
     VrechoError
-        When ``f1`` is not below the Nyquist frequency ``fs / 2``.
+        When either frequency is not below the Nyquist frequency ``fs / 2``.
 
     Examples
     --------
@@ -64,10 +64,39 @@ def ranging_probe(fs: int, *, duration_s: float = 0.005, f0: float = 4000.0, f1:
     >>> ranging_probe(48000).shape
     (240,)
     """
-    if f1 >= fs / 2:
-        raise VrechoError(f"probe: {f1} Hz needs a sample rate above {2 * f1:.0f} Hz, got {fs}")
+    top = max(f0, f1)
+    if top >= fs / 2:
+        raise VrechoError(f"probe: {top} Hz needs a sample rate above {2 * top:.0f} Hz, got {fs}")
     t = np.arange(int(round(duration_s * fs))) / fs
     return (0.5 * chirp(t, f0, duration_s, f1) * tukey(len(t), 0.25)).astype(np.float64)
+
+
+CODES_HZ = ((4000.0, 20000.0), (20000.0, 4000.0))
+"""The probe's two codes: a chirp up or down through 4 to 20 kHz. Each pulse plays one, drawn
+from the monitor's seed: another headset's ping in the other code reaches this one's matched
+filter 20 dB down (the two have the same envelope of autocorrelation: the same ranging)."""
+CODE_S = 0.005
+"""Each code's length in seconds."""
+
+
+def probe_codes(fs: int) -> tuple[np.ndarray, ...]:
+    """The headset's probe codes at ``fs`` (:data:`CODES_HZ`, :data:`CODE_S` long).
+
+    Parameters
+    ----------
+    fs : int
+        Sample rate in Hz (above 40 kHz).
+
+    Returns
+    -------
+    tuple of numpy.ndarray [shape=(round(CODE_S * fs),)]
+
+    Examples
+    --------
+    >>> [len(c) for c in probe_codes(48000)]
+    [240, 240]
+    """
+    return tuple(ranging_probe(fs, duration_s=CODE_S, f0=a, f1=b) for a, b in CODES_HZ)
 
 
 def _mix(seed: int, k: int) -> int:
@@ -79,45 +108,66 @@ def _mix(seed: int, k: int) -> int:
 
 
 class ProbeSchedule:
-    """When the probe is played: pulse ``k`` starts at sample ``k * period + dither_k``.
+    """When and what the loudspeaker plays: pulse ``k`` starts at sample ``k * period + dither_k``
+    and plays code ``code(k)``.
 
     Parameters
     ----------
     fs : int
         Sample rate in Hz.
-    probe : numpy.ndarray [shape=(m,)]
-        The pulse played.
+    probes : numpy.ndarray [shape=(m,)] or sequence of them
+        The codes a pulse may play (all ``m`` long); one array: every pulse plays it.
     period_s : float
         The nominal time between pulses in seconds (default 0.04).
     dither_s : float
         Each pulse leaves up to this much later than its period's start, in seconds (default
         0.005; 0 plays a regular train).
     seed : int, optional
-        Draws the dithers; a fresh random one by default, so that two headsets differ.
+        Draws the dithers and codes; a fresh random one by default, so that two headsets differ.
 
     Attributes
     ----------
     period, dither : int
         The period and the largest dither, in samples.
+    probes : tuple of numpy.ndarray
+        The codes.
 
     Examples
     --------
-    >>> from vrecho.headset.ranging import ProbeSchedule, ranging_probe
-    >>> s = ProbeSchedule(48000, ranging_probe(48000), seed=1)
-    >>> [s.emission(k) for k in range(3)]
-    [74, 2044, 3876]
+    >>> from vrecho.headset.ranging import ProbeSchedule, probe_codes
+    >>> s = ProbeSchedule(48000, probe_codes(48000), seed=1)
+    >>> [s.emission(k) for k in range(3)], [s.code(k) for k in range(3)]
+    ([74, 2044, 3876], [0, 1, 1])
     >>> s.first_at_or_after(2000)
     1
     """
 
-    def __init__(self, fs: int, probe: np.ndarray, *, period_s: float = 0.04, dither_s: float = 0.005,
+    def __init__(self, fs: int, probes, *, period_s: float = 0.04, dither_s: float = 0.005,
                  seed: int | None = None):
         self.fs = int(fs)
-        self.probe = np.asarray(probe, float)
+        probes = [probes] if isinstance(probes, np.ndarray) and probes.ndim == 1 else list(probes)
+        self.probes = tuple(np.asarray(p, float) for p in probes)
+        if len({len(p) for p in self.probes}) != 1:
+            raise VrechoError("probes: every code must be as long as the others")
         self.period = int(round(period_s * fs))
         self.dither = int(round(dither_s * fs))
         self.seed = int(np.random.SeedSequence(seed).generate_state(1, np.uint64)[0])
-        self._recent: dict[int, int] = {}
+        self._recent: dict[int, tuple[int, int]] = {}
+
+    @property
+    def length(self) -> int:
+        """A pulse's length in samples."""
+        return len(self.probes[0])
+
+    def _pulse(self, k: int) -> tuple[int, int]:
+        p = self._recent.get(k)
+        if p is None:
+            if len(self._recent) > 256:
+                self._recent.clear()
+            z = _mix(self.seed, k)
+            p = self._recent[k] = (k * self.period + (z % (self.dither + 1) if self.dither else 0),
+                                   (z >> 40) % len(self.probes))
+        return p
 
     def emission(self, k: int) -> int:
         """The sample at which pulse ``k`` (0, 1, ...) starts.
@@ -130,12 +180,33 @@ class ProbeSchedule:
         -------
         int
         """
-        e = self._recent.get(k)
-        if e is None:
-            if len(self._recent) > 256:
-                self._recent.clear()
-            e = self._recent[k] = k * self.period + (_mix(self.seed, k) % (self.dither + 1) if self.dither else 0)
-        return e
+        return self._pulse(k)[0]
+
+    def code(self, k: int) -> int:
+        """Which of :attr:`probes` pulse ``k`` plays.
+
+        Parameters
+        ----------
+        k : int
+
+        Returns
+        -------
+        int
+        """
+        return self._pulse(k)[1]
+
+    def probe(self, k: int) -> np.ndarray:
+        """What pulse ``k`` plays.
+
+        Parameters
+        ----------
+        k : int
+
+        Returns
+        -------
+        numpy.ndarray [shape=(m,)]
+        """
+        return self.probes[self._pulse(k)[1]]
 
     def first_at_or_after(self, n: int) -> int:
         """The first pulse that starts at or after sample ``n``.
@@ -166,12 +237,12 @@ class ProbeSchedule:
         numpy.ndarray [shape=(n,), dtype=float64]
         """
         out = np.zeros(n)
-        m = len(self.probe)
+        m = self.length
         k = self.first_at_or_after(max(start - m + 1, 0))
         while (e := self.emission(k)) < start + n:
             lo, hi = max(e, start), min(e + m, start + n)
             if hi > lo:
-                out[lo - start:hi - start] = self.probe[lo - e:hi - e]
+                out[lo - start:hi - start] = self.probe(k)[lo - e:hi - e]
             k += 1
         return out
 
@@ -180,14 +251,16 @@ class Envelope:
     """The microphone's stream: its last samples, which of them are sound (not a dropout's zeros
     or NaNs), and the envelope of their correlation with the probe, by lag.
 
-    The envelope at lag ``l`` says how much of the probe starts at sample ``l``; it is computed
+    The envelope at lag ``l`` says how much of a code starts at sample ``l``; it is computed
     once, in order, when asked for (:meth:`compute`), from samples ``l - GUARD`` to
-    ``l + m + GUARD``.
+    ``l + m + GUARD``, for one code (a pulse's window) or for all of them at once (the search
+    for the round trip: their matched filters summed, each code's cross-talk with the others
+    19 dB or more down).
 
     Parameters
     ----------
-    probe : numpy.ndarray [shape=(m,)]
-        The probe.
+    probes : sequence of numpy.ndarray [shape=(m,)]
+        The codes.
     size : int
         Samples kept (and envelope lags); older ones are forgotten.
 
@@ -204,8 +277,9 @@ class Envelope:
         Keep :attr:`coarse` (setting it True fills it from the envelope held).
     """
 
-    def __init__(self, probe: np.ndarray, size: int):
-        self.probe = np.asarray(probe, np.float32)
+    def __init__(self, probes, size: int):
+        self.probes = tuple(np.asarray(p, np.float32) for p in probes)
+        self.m = len(self.probes[0])
         self.size = int(size)
         self.x = np.zeros(self.size, np.float32)
         self.ok = np.zeros(self.size, bool)
@@ -239,27 +313,30 @@ class Envelope:
         -------
         int
         """
-        return self.n - len(self.probe) - GUARD + 1
+        return self.n - self.m - GUARD + 1
 
-    def compute(self, upto: int) -> None:
+    def compute(self, upto: int, *, code: int | None = None) -> None:
         """Compute the envelope up to lag ``upto`` (exclusive), or as far as the samples allow.
 
         Parameters
         ----------
         upto : int
+        code : int, optional
+            The code to correlate with (all of them, summed, by default).
         """
         upto = min(upto, self.ready())
         self.done = max(self.done, self.n - self.size + GUARD)  # lags whose samples are gone stay unknown
-        m = len(self.probe)
+        m = self.m
         while self.done < upto:
             lo = self.done
             hi = min(upto, lo + 8192)
             seg = self.samples(lo - GUARD, hi + m + GUARD - 1) if lo >= GUARD else \
                 np.r_[np.zeros(GUARD - lo, np.float32), self.samples(0, hi + m + GUARD - 1)]
             nfft = fft.next_fast_len(len(seg) + m + GUARD, real=True)
-            kernel = self._kernels.get(nfft)
+            kernel = self._kernels.get((nfft, code))
             if kernel is None:
-                kernel = self._kernels[nfft] = analytic_filter(self.probe, nfft).astype(np.complex64)
+                sound = sum(self.probes) if code is None else self.probes[code]
+                kernel = self._kernels[(nfft, code)] = analytic_filter(sound, nfft).astype(np.complex64)
             env = analytic_envelope(seg, kernel, nfft)[GUARD:GUARD + hi - lo]
             a = lo % self.size
             first = min(len(env), self.size - a)
@@ -268,6 +345,16 @@ class Envelope:
             self.done = hi
             if self._searching:
                 self._cells(lo, hi)
+
+    def redo(self, frm: int) -> None:
+        """Compute the envelope again from lag ``frm`` on (for another code), as far as the
+        samples held allow.
+
+        Parameters
+        ----------
+        frm : int
+        """
+        self.done = min(self.done, max(frm, self.n - self.size + GUARD))
 
     def skip(self, to: int) -> None:
         """Leave the envelope of lags up to ``to`` uncomputed (zero): none will be asked for.
@@ -376,8 +463,8 @@ class EchoFinder:
 
     Parameters
     ----------
-    probe : numpy.ndarray [shape=(m,)]
-        The probe.
+    probes : sequence of numpy.ndarray [shape=(m,)]
+        The codes.
     fs : int
         Sample rate in Hz.
     window : int
@@ -390,35 +477,53 @@ class EchoFinder:
         Loudspeaker to microphone (:func:`mic_geometry`).
     """
 
-    def __init__(self, probe: np.ndarray, fs: int, window: int, *, threshold: float, min_range_m: float,
+    def __init__(self, probes, fs: int, window: int, *, threshold: float, min_range_m: float,
                  max_range_m: float, mic_offset_m):
-        self.probe, self.fs, self.window = probe, fs, window
+        self.probes, self.fs, self.window = tuple(probes), fs, window
         self.threshold, self.min_range_m, self.max_range_m = threshold, min_range_m, max_range_m
         self._mic = mic_geometry(mic_offset_m)
-        self._clipped_floors: dict[int, np.ndarray] = {}
-        lag = np.arange(window + len(probe), dtype=float)  # the direct sound's sidelobes by lag
-        self._sidelobe = 10 ** (-(32 + 6 * np.log2(np.maximum(lag, 1) / (0.5 * len(probe)) + 1)) / 20)
+        self._clipped_floors: dict[tuple[int, int], np.ndarray] = {}
+        # The direct sound's sidelobes by lag: 6 dB above the codes' own (the matched filter's
+        # response to the code itself), and never below a floor falling from -32 dB (a real
+        # loudspeaker's and microphone's own ringing).
+        lag = np.arange(window + len(self.probes[0]), dtype=float)
+        floor = 10 ** (-(32 + 6 * np.log2(np.maximum(lag, 1) / (0.0025 * fs) + 1)) / 20)
+        own = np.max([self._response(p, len(lag)) for p in self.probes], axis=0)  # (doubled: 6 dB of slack)
+        self._sidelobe = np.maximum(floor, own)
+        reach = int(np.flatnonzero(own > 10 ** (-40 / 20))[-1]) + 1  # an echo's own sidelobes above -40 dB
+        self._lobes = np.r_[1.0, own[1:reach]]
 
-    def _clipped_sidelobe(self, fraction: float) -> np.ndarray:
-        """The floor beside a clipped direct sound: the matched filter's response to the probe
+    @staticmethod
+    def _response(x: np.ndarray, n_lags: int, probe: np.ndarray | None = None) -> np.ndarray:
+        """The matched filter's envelope of ``probe`` (``x`` itself by default) on ``x``, relative
+        to its lag-0 value, widened by a few samples (slack in timing) and doubled (6 dB)."""
+        p = x if probe is None else probe
+        m = len(p)
+        n = 4 * m
+        y = np.zeros(n - m)
+        y[:m] = x
+        env = analytic_envelope(y, analytic_filter(p, n), n)[:n - m]  # past n - m: negative lags
+        out = np.zeros(max(n_lags, n - m))
+        out[:len(env)] = 2.0 * maximum_filter1d(env / env[0], 9)
+        out[:3] = 0.0  # (the main lobe itself)
+        return out[:n_lags]
+
+    def _clipped_sidelobe(self, fraction: float, code: int) -> np.ndarray:
+        """The floor beside a clipped direct sound: the matched filter's response to the code
         clipped so that ``fraction`` of its samples sit at the rail (its distortion spreads over
-        one probe's length after the peak, up to some 30 dB below it), 6 dB above that, and never
+        one code's length after the peak, up to some 30 dB below it), 6 dB above that, and never
         below the clean sidelobes. Cached in steps of 5 %."""
         step = max(1, int(round(fraction * 20)))
-        if step not in self._clipped_floors:
-            peak = np.abs(self.probe).max()  # (clipped wholly: its signs)
-            level = max(np.quantile(np.abs(self.probe), 1 - step / 20), 1e-3 * peak)
-            m = len(self.probe)
-            n = 4 * m
-            x = np.zeros(n - m)
-            x[:m] = np.clip(self.probe, -level, level)
-            env = analytic_envelope(x, analytic_filter(self.probe, n), n)[:n - m]  # past n - m: negative lags
-            profile = np.zeros(max(len(self._sidelobe), n - m))
-            profile[:len(env)] = maximum_filter1d(env / env[0], 9)  # a few samples' slack in timing
-            self._clipped_floors[step] = np.maximum(self._sidelobe, 2.0 * profile[:len(self._sidelobe)])
-        return self._clipped_floors[step]
+        if (step, code) not in self._clipped_floors:
+            probe = self.probes[code]
+            peak = np.abs(probe).max()  # (clipped wholly: its signs)
+            level = max(np.quantile(np.abs(probe), 1 - step / 20), 1e-3 * peak)
+            clipped = np.clip(probe, -level, level)
+            self._clipped_floors[(step, code)] = np.maximum(self._sidelobe,
+                                                            self._response(clipped, len(self._sidelobe), probe))
+        return self._clipped_floors[(step, code)]
 
-    def find(self, env: Envelope, ref: float, stop: int, *, clipped: bool = False):
+    def find(self, env: Envelope, ref: float, stop: int, *, code: int, clipped: bool = False):
         """The echoes of the pulse whose direct sound arrived at ``ref``, from the envelope up to
         lag ``stop``, keeping those that have ended before any damage.
 
@@ -430,6 +535,8 @@ class EchoFinder:
             The direct sound's arrival, in fractional samples: the time reference.
         stop : int
             The lag up to which to look (exclusive).
+        code : int
+            The code the pulse played (the envelope's).
         clipped : bool
             Whether a block near the direct sound came clipped (its distortion is then kept out).
 
@@ -440,7 +547,7 @@ class EchoFinder:
             sound's); None when damage (a dropout, NaNs) reaches the direct sound.
         """
         d0 = int(round(ref))
-        m = len(self.probe)
+        m = len(self.probes[0])
         good = env.sound_until(d0 - GUARD, stop + m)
         if good < d0 + m + GUARD:
             return None  # (the direct sound must be whole: it is the reference)
@@ -454,7 +561,7 @@ class EchoFinder:
         if clipped:
             rail = np.count_nonzero(at_rail(env.samples(d0, d0 + m)))
             if rail >= 3:  # the direct sound clipped: its distortion rises above the sidelobes, near it
-                sidelobe = self._clipped_sidelobe(rail / m)
+                sidelobe = self._clipped_sidelobe(rail / m, code)
         seg = span[lo - d0:]
         quarter = seg[::4]  # every 4th lag: the floor, at a quarter of the cost
         noise = float(np.partition(quarter, len(quarter) // 2)[len(quarter) // 2]) + 1e-12
@@ -463,21 +570,27 @@ class EchoFinder:
         # The direct sound's matched-filter sidelobes fall off with lag; an echo must rise above them too.
         peaks = above + lo - d0
         peaks = peaks[span[peaks] > peak_direct * sidelobe[peaks]]
+        if len(peaks) > 1:  # one echo per surface: its own sidelobes (10, 18, 26... samples out) are not echoes
+            peaks = self._own_lobes_out(span, peaks)
         if not len(peaks):
             return []
         excess = SPEED_OF_SOUND * (parabolic_peaks(span, peaks) + d0 - ref) / self.fs
         d = echo_distance(excess, *self._mic)
         ok = (excess > 0) & (d >= self.min_range_m) & (d <= self.max_range_m)
-        # One echo per surface: an echo's envelope has sidelobes some 5 samples either side (2 cm
-        # of distance) that a track could follow instead; peaks closer than 3 cm keep the strongest.
-        out = []
-        for dist, strength in zip(d[ok].tolist(), (span[peaks][ok] / peak_direct).tolist()):
-            if out and dist - out[-1][0] < 0.03:
-                if strength > out[-1][1]:
-                    out[-1] = (dist, strength)
-                continue
-            out.append((dist, strength))
-        return out
+        return list(zip(d[ok].tolist(), (span[peaks][ok] / peak_direct).tolist()))
+
+    def _own_lobes_out(self, span: np.ndarray, peaks: np.ndarray) -> np.ndarray:
+        """The peaks less those that are a stronger peak's own sidelobes: within reach of it and
+        no stronger, relative to it, than the codes' autocorrelation there (6 dB of slack)."""
+        level = span[peaks].tolist()
+        lags = peaks.tolist()
+        reach = len(self._lobes)
+        keep = []
+        for i in sorted(range(len(lags)), key=level.__getitem__, reverse=True):
+            if not any(abs(lags[i] - lags[j]) < reach and level[i] <= level[j] * self._lobes[abs(lags[i] - lags[j])]
+                       for j in keep):
+                keep.append(i)
+        return peaks[sorted(keep)]
 
 
 def mic_geometry(mic_offset_m) -> tuple[float, float]:

@@ -107,9 +107,12 @@ class RoundTrip:
         score = np.full(span, np.inf, np.float32)
         for i in range(1, n_pulses + 1):
             score = np.minimum(score, coarse[np.clip(avail - i, 0, None), cols])
-        score[avail < n_pulses] = 0.0
+        testable = avail >= n_pulses
+        score[~testable] = 0.0
         top = float(score.max())
-        if top <= 0 or top < 10.0 * float(np.median(score)) + 1e-12:
+        # The direct sound stands far above the stream's envelope at the delays that can be told.
+        floor = float(np.median(rows[rows > 0])) if (rows > 0).any() else 0.0
+        if top <= 0 or top < 10.0 * float(np.median(score[testable])) or top < 20.0 * floor:
             return False
         j = int(np.argmax(score >= 0.3 * top))  # the earliest strong one: the direct sound, before its echoes
         while j + 1 < span and score[j + 1] > score[j]:

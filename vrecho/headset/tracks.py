@@ -13,6 +13,46 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
+_SIGMA_M = 0.01
+"""How far a surface's echo strays from the track's prediction (head bob, the filter's lag)."""
+_LOG_NORM = -np.log(np.sqrt(2 * np.pi) * _SIGMA_M)
+_LOG_MISS = np.log(0.2)
+CONFIRMED = np.log(100.0)
+"""A track's :attr:`~Track.score` from which its echoes count as a surface's."""
+
+
+def _quadratic(us: list, ys: list):
+    """Least squares of y on (u^2, u, 1) in plain floats (a few points: faster than arrays).
+
+    Returns (p2, p1, p0, the normal matrix's inverse, the residuals' sum of squares, the
+    residuals), or None when the points do not determine a parabola.
+    """
+    n = float(len(us))
+    s1 = s2 = s3 = s4 = b0 = b1 = b2 = 0.0
+    for u, y in zip(us, ys):
+        u2 = u * u
+        s1 += u
+        s2 += u2
+        s3 += u2 * u
+        s4 += u2 * u2
+        b0 += y
+        b1 += u * y
+        b2 += u2 * y
+    # The normal equations' matrix ((s4, s3, s2), (s3, s2, s1), (s2, s1, n)) is symmetric: its
+    # cofactors over its determinant are its inverse.
+    c00, c01, c02 = s2 * n - s1 * s1, -(s3 * n - s1 * s2), s3 * s1 - s2 * s2
+    c11, c12, c22 = s4 * n - s2 * s2, -(s4 * s1 - s3 * s2), s4 * s2 - s3 * s3
+    det = s4 * c00 + s3 * c01 + s2 * c02
+    if abs(det) < 1e-18:
+        return None
+    inv = ((c00 / det, c01 / det, c02 / det), (c01 / det, c11 / det, c12 / det), (c02 / det, c12 / det, c22 / det))
+    p2 = inv[0][0] * b2 + inv[0][1] * b1 + inv[0][2] * b0
+    p1 = inv[1][0] * b2 + inv[1][1] * b1 + inv[1][2] * b0
+    p0 = inv[2][0] * b2 + inv[2][1] * b1 + inv[2][2] * b0
+    resid = [y - (p2 * u * u + p1 * u + p0) for u, y in zip(us, ys)]
+    return p2, p1, p0, inv, sum(r * r for r in resid), resid
+
+
 @dataclass
 class Track:
     """A surface the echoes follow over pulses, as :class:`~vrecho.headset.BoundaryMonitor` keeps it.
@@ -37,13 +77,17 @@ class Track:
     views : dict of str to float
         What the camera made of it: surface ("wall", "glass", "mirror") to summed confidence.
     jitter : float
-        The filter's residuals' mean square, in square metres (a running mean): how far its
-        echoes stray from its prediction.
+        The filter's residuals' mean square, in square metres (their mean over the first five,
+        then a running mean): how far its echoes stray from its prediction.
     gate_m : float
         How far from its prediction an echo may lie and still be this surface's, in metres:
         12 cm while the track is young (its speed not yet known), then five times its rms
         residual, at least 4 cm (so another headset's pings, which land elsewhere every pulse,
         seldom fall in it).
+    score : float
+        The evidence that the echoes are one surface's and not stray peaks that happened near the
+        prediction: the log-likelihood ratio summed over pulses (:meth:`update`, :meth:`missed`);
+        :attr:`confirmed` above :data:`CONFIRMED`.
     """
 
     times: deque = field(default_factory=lambda: deque(maxlen=64))
@@ -56,6 +100,7 @@ class Track:
     views: dict = field(default_factory=dict)  # what the camera made of it: surface -> summed confidence
     jitter: float = 0.0025  # residuals' mean square (m^2): starts at (5 cm)^2
     gate_m: float = 0.12  # how far from its prediction an echo may lie and be this surface's
+    score: float = 0.0  # log-likelihood ratio, a surface against stray peaks (see update)
 
     @property
     def surface(self) -> str:
@@ -77,7 +122,18 @@ class Track:
         """
         return self.d_hat + (self.speed or 0.0) * (t - self.times[-1])
 
-    def update(self, t: float, d: float, strength: float, *, alpha: float = 0.6, beta: float = 0.3) -> None:
+    @property
+    def confirmed(self) -> bool:
+        """Whether the echoes are a surface's beyond reasonable doubt (:attr:`score`)."""
+        return self.score >= CONFIRMED
+
+    def missed(self) -> None:
+        """A pulse came without an echo for it: evidence against (a surface's echo is heard four
+        times in five)."""
+        self.score = max(self.score + _LOG_MISS, -10.0)
+
+    def update(self, t: float, d: float, strength: float, *, clutter_per_m: float = 1.0, alpha: float = 0.6,
+               beta: float = 0.3) -> None:
         """Add one echo: an alpha-beta filter of distance and speed, and the raw history.
 
         The filter follows a wearer who starts or stops walking within a few pulses. The first
@@ -92,19 +148,29 @@ class Track:
             The echo's distance in metres.
         strength : float
             The echo's peak as a share of the direct sound's.
+        clutter_per_m : float
+            Stray peaks per metre of range in this pulse (its echoes over the range looked at):
+            the score weighs how near the prediction the echo fell against how likely a stray
+            peak is to fall as near.
         alpha, beta : float
             The filter's gains on distance and speed (default 0.6 and 0.3).
         """
+        clutter = max(clutter_per_m, 0.25)
         if not self.times:
             self.d_hat, self.speed = d, None
         else:
             dt = t - self.times[-1]
             if self.speed is None:  # the second echo: the speed from the two (a fast walk's echo moves ~8 cm a pulse)
                 self.d_hat, self.speed = d, (d - self.d_hat) / max(dt, 1e-3)
+                self.score += np.log(1.0 / (2 * 0.12 * clutter))  # anywhere within the young gate
             else:
                 predicted = self.predict(t)
                 r = d - predicted
-                self.jitter += 0.2 * (r * r - self.jitter)
+                # A surface's echo falls within about a centimetre of the prediction; a stray peak
+                # anywhere, at the pulse's density of peaks.
+                self.score = min(self.score + _LOG_NORM - 0.5 * (r / _SIGMA_M) ** 2 - np.log(clutter), 30.0)
+                n = len(self.times) - 1  # residuals so far, this one included: their mean, then a running one
+                self.jitter = r * r if n == 1 else self.jitter + max(0.2, 1.0 / n) * (r * r - self.jitter)
                 self.d_hat = predicted + alpha * r
                 self.speed += beta * r / max(dt, 1e-3)
         self.times.append(t)
@@ -230,48 +296,34 @@ class Track:
             extrapolation, and a head's bob hides the curvature).
         """
         times, dists = self._history(extra)
-        # One backward pass in plain floats over the last points (some 15 a span), keeping each
-        # span's sums as the pass reaches its first point.
         t_last = times[-1]
-        sums = {}
-        acc = [0.0] * 9  # n, sum t, t^2, t^3, t^4, y, t y, t^2 y, y^2 (t from the last point, y = d^2)
-        bounds = sorted(spans_s)
+        longest = max(spans_s)
+        us, ys = [], []  # the last points, newest first: time from the last point, y = d^2
         for t, d in zip(reversed(times), reversed(dists)):
-            u = t - t_last
-            while bounds and t < t_last - bounds[0]:  # past the shortest open span's start
-                sums[bounds.pop(0)] = (tuple(acc), -prev_u)
-            if not bounds:
+            if t < t_last - longest:
                 break
-            u2, y = u * u, d * d
-            acc[0] += 1.0
-            acc[1] += u
-            acc[2] += u2
-            acc[3] += u2 * u
-            acc[4] += u2 * u2
-            acc[5] += y
-            acc[6] += u * y
-            acc[7] += u2 * y
-            acc[8] += y * y
-            prev_u = u
-        for span_s in bounds:  # spans longer than the track
-            sums[span_s] = (tuple(acc), -prev_u)
+            us.append(t - t_last)
+            ys.append(d * d)
         for span_s in spans_s:
-            (n, s1, s2, s3, s4, b0, b1, b2, yy), reach = sums[span_s]
-            if reach < 0.9 * span_s or n < 8:
+            n = sum(1 for u in us if u >= -span_s)
+            if n < 8 or -us[n - 1] < 0.9 * span_s:
                 continue
-            # Least squares of y on (t^2, t, 1): the normal equations' matrix ((s4, s3, s2),
-            # (s3, s2, s1), (s2, s1, n)) is symmetric: its cofactors over its determinant are its inverse.
-            c00, c01, c02 = s2 * n - s1 * s1, -(s3 * n - s1 * s2), s3 * s1 - s2 * s2
-            c11, c12, c22 = s4 * n - s2 * s2, -(s4 * s1 - s3 * s2), s4 * s2 - s3 * s3
-            det = s4 * c00 + s3 * c01 + s2 * c02
-            if abs(det) < 1e-18:
+            fit = _quadratic(us[:n], ys[:n])
+            if fit is None:
                 continue
-            inv = ((c00 / det, c01 / det, c02 / det), (c01 / det, c11 / det, c12 / det), (c02 / det, c12 / det, c22 / det))
-            xy = (b2, b1, b0)
-            p2, p1, p0 = (sum(r[k] * xy[k] for k in range(3)) for r in inv)
+            p2, p1, p0, inv, rss, resid = fit
+            # An echo of another surface taken where two crossed in range: refit without the
+            # points that stray more than four times the residuals' median spread (and 5 mm).
+            spread = 4.0 * 1.4826 * sorted(abs(r) for r in resid)[n // 2]
+            keep = [i for i in range(n) if abs(resid[i]) <= max(spread, 0.01 * ys[i] ** 0.5)]
+            if 8 <= len(keep) < n:
+                fit = _quadratic([us[i] for i in keep], [ys[i] for i in keep])
+                if fit is None:
+                    continue
+                p2, p1, p0, inv, rss, _ = fit
+                n = len(keep)
             if p2 <= 1e-3:  # not nearing at a steady pace (starting, stopping): cannot tell yet
                 continue
-            rss = max(yy - (p2 * b2 + p1 * b1 + p0 * b0), 0.0)
             g = (p1 ** 2 / (4 * p2 ** 2), -p1 / (2 * p2), 1.0)
             var = sum(g[r] * inv[r][c] * g[c] for r in range(3) for c in range(3)) * rss / max(n - 3, 1)
             a2 = p0 - p1 ** 2 / (4 * p2)

@@ -328,7 +328,7 @@ def walk_responses(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps:
         out.position_m[k], out.forward[k], out.mic_m[k] = pos, fwd, mic
     # The direct path's share of the first response: the level every other sound is set against.
     direct_len = int((headset.spacing_m / SPEED_OF_SOUND + 0.0008) * fs) + 1
-    out.direct = float(np.max(np.abs(np.convolve(out.responses[0][:direct_len], schedule.probe))))
+    out.direct = float(np.max(np.abs(np.convolve(out.responses[0][:direct_len], schedule.probe(0)))))
     return out
 
 
@@ -355,7 +355,7 @@ def other_headsets(walk: WalkResponses, n: int, rng: np.random.Generator) -> np.
     import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
 
     sch, fs, room = walk.schedule, walk.fs, walk.scene.room
-    total = int(walk.written[-1]) + sch.period + int(WALK_SIMULATION.length_s * fs) + len(sch.probe)
+    total = int(walk.written[-1]) + sch.period + int(WALK_SIMULATION.length_s * fs) + sch.length
     out = np.zeros(total)
     lag = pra.constants.get("frac_delay_length") // 2
     n_ir = int(WALK_SIMULATION.length_s * fs)
@@ -373,7 +373,7 @@ def other_headsets(walk: WalkResponses, n: int, rng: np.random.Generator) -> np.
             continue
         facing = rng.normal(size=3)
         facing[2] *= 0.2
-        other = ProbeSchedule(fs, sch.probe, period_s=sch.period / fs, dither_s=sch.dither / fs,
+        other = ProbeSchedule(fs, sch.probes, period_s=sch.period / fs, dither_s=sch.dither / fs,
                               seed=int(rng.integers(2 ** 32)))
         offset = int(rng.integers(0, sch.period))
         p = float(rng.uniform(0.55, 1.0))
@@ -388,8 +388,8 @@ def other_headsets(walk: WalkResponses, n: int, rng: np.random.Generator) -> np.
                 r.add_source(where + drift * (e / fs), directivity=None if p >= 1 else emitter_directivity(facing, p))
                 r.add_microphone(walk.mic_m[i])
                 r.compute_rir()
-                response = np.convolve(np.asarray(r.rir[0][0], float)[lag:lag + n_ir], sch.probe)
-            seg = response[:total - e]
+                response = np.asarray(r.rir[0][0], float)[lag:lag + n_ir]
+            seg = np.convolve(response, other.probe(k))[:total - e]
             out[e:e + len(seg)] += seg
     return out
 
@@ -432,10 +432,10 @@ def record_walk(walk: WalkResponses, rng: np.random.Generator, *, link: AudioLin
     fs, sch = walk.fs, walk.schedule
     arrival = link.arrival(walk.written, fs)
     n_ir = len(walk.responses[0])
-    total = int(np.ceil(arrival.max())) + sch.period + n_ir + len(sch.probe) + 1
+    total = int(np.ceil(arrival.max())) + sch.period + n_ir + sch.length + 1
     x = np.zeros(total)
-    for a, h in zip(arrival, walk.responses):
-        seg = np.convolve(h, sch.probe)
+    for k, (a, h) in enumerate(zip(arrival, walk.responses)):
+        seg = np.convolve(h, sch.probe(k))
         e = int(round(a))
         x[e:e + len(seg)] += seg
     if others is not None:  # (where their pings fall on this stream's clock is arbitrary: their own start)
