@@ -1,6 +1,6 @@
 """The headset call's name as ARCHITECTURE.md gives it (``vrecho.boundary.BoundaryMonitor``): the
 code lives in :mod:`vrecho.headset`."""
 
-from .headset.boundary import Alert, BoundaryMonitor, ranging_probe
+from .headset import Alert, BoundaryMonitor, ranging_probe
 
 __all__ = ["Alert", "BoundaryMonitor", "ranging_probe"]

@@ -2,8 +2,8 @@
 
 - :class:`BoundaryMonitor` (boundary.py): the echo ranging of a full-duplex audio callback, its
   alerts and their hysteresis; the surfaces it follows are :class:`~.tracks.Track` (tracks.py);
-  its probe, when it plays it, the microphone's envelope and the echoes in it are ranging.py's,
-  the lock on its own round trip roundtrip.py's.
+  its probe, when it plays it, and the microphone's envelope are ranging.py's,
+  the echoes in it echoes.py's, the lock on its own round trip roundtrip.py's.
 - :func:`look` (view.py): what the headset's camera says of a surface an echo found (wall, glass
   or mirror), shown to the monitor with :meth:`BoundaryMonitor.see`.
 

@@ -67,7 +67,8 @@ import numpy as np
 
 from ..errors import VrechoError
 from ..signals import SPEED_OF_SOUND
-from .ranging import GUARD, EchoFinder, Envelope, ProbeSchedule, clipped, echo_path, mic_geometry, probe_codes, zero_runs
+from .echoes import EchoFinder, echo_path, mic_geometry
+from .ranging import GUARD, Envelope, ProbeSchedule, clipped, probe_codes, zero_runs
 from .roundtrip import RoundTrip
 from .tracks import Track
 from .view import look_all

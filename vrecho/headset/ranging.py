@@ -12,21 +12,19 @@ in the room play the same call. So:
 - :class:`Envelope`: the microphone's samples and the envelope of their correlation with the
   probe, computed once per sample as the stream arrives (in pieces of any size; a few samples of
   guard at each piece's edges keep the analytic signal exact to -50 dB).
-- :class:`EchoFinder`: a pulse's echoes in the envelope, timed against its direct sound.
-
-The lock on the monitor's own round trip is :mod:`.roundtrip`'s.
+A pulse's echoes in the envelope are :mod:`.echoes`'s; the lock on the monitor's own round
+trip is :mod:`.roundtrip`'s.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from scipy import fft
-from scipy.ndimage import maximum_filter1d
 from scipy.signal import chirp
 from scipy.signal.windows import tukey
 
 from ..errors import VrechoError
-from ..signals import SPEED_OF_SOUND, analytic_envelope, analytic_filter, parabolic_peaks
+from ..signals import analytic_envelope, analytic_filter
 
 GUARD = 16
 """Samples of guard at each edge of a piece of the streamed envelope (the analytic signal's tails
@@ -452,224 +450,6 @@ class Envelope:
         """
         ok = self._ring(self.ok, a, b)
         return b if ok.all() else a + int(np.argmin(ok))
-
-
-class EchoFinder:
-    """A pulse's echoes in the envelope: peaks above the noise floor (``threshold`` times the
-    envelope's median) and above the direct sound's sidelobes (when the direct sound is clipped,
-    above the clipped probe's own distortion, which spreads over one probe's length after it),
-    each timed to a fraction of a sample. A surface straight ahead at ``d`` returns the echo
-    path ``L = sqrt((2 d)^2 + s^2)`` (``s``: loudspeaker to microphone): ``d`` follows.
-
-    Parameters
-    ----------
-    probes : sequence of numpy.ndarray [shape=(m,)]
-        The codes.
-    fs : int
-        Sample rate in Hz.
-    window : int
-        The longest lag after the direct sound looked at, in samples.
-    threshold : float
-        How far above the envelope's median an echo must rise (a factor).
-    min_range_m, max_range_m : float
-        The distances echoes are looked for between, in metres.
-    mic_offset_m : float or sequence of 3 floats
-        Loudspeaker to microphone (:func:`mic_geometry`).
-    """
-
-    def __init__(self, probes, fs: int, window: int, *, threshold: float, min_range_m: float,
-                 max_range_m: float, mic_offset_m):
-        self.probes, self.fs, self.window = tuple(probes), fs, window
-        self.threshold, self.min_range_m, self.max_range_m = threshold, min_range_m, max_range_m
-        self._mic = mic_geometry(mic_offset_m)
-        self._clipped_floors: dict[tuple[int, int], np.ndarray] = {}
-        # The direct sound's sidelobes by lag: 6 dB above the codes' own (the matched filter's
-        # response to the code itself), and never below a floor falling from -32 dB (a real
-        # loudspeaker's and microphone's own ringing).
-        lag = np.arange(window + len(self.probes[0]), dtype=float)
-        floor = 10 ** (-(32 + 6 * np.log2(np.maximum(lag, 1) / (0.0025 * fs) + 1)) / 20)
-        own = np.max([self._response(p, len(lag)) for p in self.probes], axis=0)  # (doubled: 6 dB of slack)
-        self._sidelobe = np.maximum(floor, own)
-        reach = int(np.flatnonzero(own > 10 ** (-40 / 20))[-1]) + 1  # an echo's own sidelobes above -40 dB
-        self._lobes = np.r_[1.0, own[1:reach]]
-
-    @staticmethod
-    def _response(x: np.ndarray, n_lags: int, probe: np.ndarray | None = None) -> np.ndarray:
-        """The matched filter's envelope of ``probe`` (``x`` itself by default) on ``x``, relative
-        to its lag-0 value, widened by a few samples (slack in timing) and doubled (6 dB)."""
-        p = x if probe is None else probe
-        m = len(p)
-        n = 4 * m
-        y = np.zeros(n - m)
-        y[:m] = x
-        env = analytic_envelope(y, analytic_filter(p, n), n)[:n - m]  # past n - m: negative lags
-        out = np.zeros(max(n_lags, n - m))
-        out[:len(env)] = 2.0 * maximum_filter1d(env / env[0], 9)
-        out[:3] = 0.0  # (the main lobe itself)
-        return out[:n_lags]
-
-    def _clipped_sidelobe(self, fraction: float, code: int) -> np.ndarray:
-        """The floor beside a clipped direct sound: the matched filter's response to the code
-        clipped so that ``fraction`` of its samples sit at the rail (its distortion spreads over
-        one code's length after the peak, up to some 30 dB below it), 6 dB above that, and never
-        below the clean sidelobes. Cached in steps of 5 %."""
-        step = max(1, int(round(fraction * 20)))
-        if (step, code) not in self._clipped_floors:
-            probe = self.probes[code]
-            peak = np.abs(probe).max()  # (clipped wholly: its signs)
-            level = max(np.quantile(np.abs(probe), 1 - step / 20), 1e-3 * peak)
-            clipped = np.clip(probe, -level, level)
-            self._clipped_floors[(step, code)] = np.maximum(self._sidelobe,
-                                                            self._response(clipped, len(self._sidelobe), probe))
-        return self._clipped_floors[(step, code)]
-
-    def find(self, env: Envelope, ref: float, stop: int, *, code: int, clipped: bool = False):
-        """The echoes of the pulse whose direct sound arrived at ``ref``, from the envelope up to
-        lag ``stop``, keeping those that have ended before any damage.
-
-        Parameters
-        ----------
-        env : Envelope
-            The stream, its envelope computed up to ``stop``.
-        ref : float
-            The direct sound's arrival, in fractional samples: the time reference.
-        stop : int
-            The lag up to which to look (exclusive).
-        code : int
-            The code the pulse played (the envelope's).
-        clipped : bool
-            Whether a block near the direct sound came clipped (its distortion is then kept out).
-
-        Returns
-        -------
-        list of (float, float) or None
-            Each echo's distance in metres and strength (its peak as a share of the direct
-            sound's); None when damage (a dropout, NaNs) reaches the direct sound.
-        """
-        d0 = int(round(ref))
-        m = len(self.probes[0])
-        good = env.sound_until(d0 - GUARD, stop + m)
-        if good < d0 + m + GUARD:
-            return None  # (the direct sound must be whole: it is the reference)
-        stop = min(stop, good - m - GUARD + 1)  # damage ends the window: the echoes wholly heard before it count
-        lo = int(ref + 2 * self.min_range_m / SPEED_OF_SOUND * self.fs)
-        if lo >= stop - 2:
-            return []
-        span = env.envelope(d0, stop)
-        peak_direct = float(env.envelope(d0 - 1, d0 + 2).max())
-        sidelobe = self._sidelobe
-        if clipped:
-            rail = np.count_nonzero(at_rail(env.samples(d0, d0 + m)))
-            if rail >= 3:  # the direct sound clipped: its distortion rises above the sidelobes, near it
-                sidelobe = self._clipped_sidelobe(rail / m, code)
-        seg = span[lo - d0:]
-        quarter = seg[::4]  # every 4th lag: the floor, at a quarter of the cost
-        noise = float(np.partition(quarter, len(quarter) // 2)[len(quarter) // 2]) + 1e-12
-        above = np.flatnonzero(seg[1:-1] > self.threshold * noise) + 1  # few: the echoes' main lobes
-        above = above[(seg[above] > seg[above - 1]) & (seg[above] >= seg[above + 1])]  # their local maxima
-        # The direct sound's matched-filter sidelobes fall off with lag; an echo must rise above them too.
-        peaks = above + lo - d0
-        peaks = peaks[span[peaks] > peak_direct * sidelobe[peaks]]
-        if len(peaks) > 1:  # one echo per surface: its own sidelobes (10, 18, 26... samples out) are not echoes
-            peaks = self._own_lobes_out(span, peaks)
-        if not len(peaks):
-            return []
-        excess = SPEED_OF_SOUND * (parabolic_peaks(span, peaks) + d0 - ref) / self.fs
-        d = echo_distance(excess, *self._mic)
-        ok = (excess > 0) & (d >= self.min_range_m) & (d <= self.max_range_m)
-        return list(zip(d[ok].tolist(), (span[peaks][ok] / peak_direct).tolist()))
-
-    def _own_lobes_out(self, span: np.ndarray, peaks: np.ndarray) -> np.ndarray:
-        """The peaks less those that are a stronger peak's own sidelobes: within reach of it and
-        no stronger, relative to it, than the codes' autocorrelation there (6 dB of slack)."""
-        level = span[peaks].tolist()
-        lags = peaks.tolist()
-        reach = len(self._lobes)
-        keep = []
-        for i in sorted(range(len(lags)), key=level.__getitem__, reverse=True):
-            if not any(abs(lags[i] - lags[j]) < reach and level[i] <= level[j] * self._lobes[abs(lags[i] - lags[j])]
-                       for j in keep):
-                keep.append(i)
-        return peaks[sorted(keep)]
-
-
-def mic_geometry(mic_offset_m) -> tuple[float, float]:
-    """The loudspeaker-to-microphone spacing and its part along the wearer's forward axis.
-
-    Parameters
-    ----------
-    mic_offset_m : float or sequence of 3 floats
-        A spacing in metres across the forward axis, or the microphone's place from the
-        loudspeaker, (forward, left, up) in metres, as the headset's maker gives it.
-
-    Returns
-    -------
-    spacing, forward : float
-        In metres.
-
-    Raises
-    ------
-    VrechoError
-        For a spacing that is not 0 to 0.5 m, or not three finite numbers.
-
-    Examples
-    --------
-    >>> mic_geometry(0.07), mic_geometry((0.03, 0.0, 0.04))
-    ((0.07, 0.0), (0.05, 0.03))
-    """
-    o = np.atleast_1d(np.asarray(mic_offset_m, float))
-    if o.shape not in ((1,), (3,)) or not np.all(np.isfinite(o)):
-        raise VrechoError(f"mic_offset_m: expected metres, or (forward, left, up) in metres, got {mic_offset_m!r}")
-    s = float(np.linalg.norm(o))
-    if not 0.0 <= s <= 0.5:
-        raise VrechoError(f"mic_offset_m: expected a spacing of 0 to 0.5 m, got {s:.3f} m")
-    return round(s, 12), round(float(o[0]) if o.shape == (3,) else 0.0, 12)
-
-
-def echo_path(d, spacing: float, forward: float):
-    """The echo path's excess over the direct path, for a surface ``d`` straight ahead.
-
-    The image of the loudspeaker lies ``2 d`` ahead; the microphone ``forward`` ahead of the
-    loudspeaker and ``spacing`` from it: the path is sqrt(4 d^2 - 4 d forward + spacing^2).
-
-    Parameters
-    ----------
-    d : float or numpy.ndarray
-        Distance to the surface's plane, metres.
-    spacing, forward : float
-        :func:`mic_geometry`'s.
-
-    Returns
-    -------
-    float or numpy.ndarray
-        Metres, the path less the direct path (``spacing``).
-    """
-    return np.sqrt(4 * d * d - 4 * d * forward + spacing * spacing) - spacing
-
-
-def echo_distance(excess, spacing: float, forward: float):
-    """:func:`echo_path` inverted: the distance to the surface ahead whose echo came ``excess``
-    metres of path after the direct sound.
-
-    Parameters
-    ----------
-    excess : float or numpy.ndarray
-        Metres of path after the direct sound.
-    spacing, forward : float
-        :func:`mic_geometry`'s.
-
-    Returns
-    -------
-    float or numpy.ndarray
-        Metres.
-
-    Examples
-    --------
-    >>> round(float(echo_distance(echo_path(1.2, 0.05, 0.03), 0.05, 0.03)), 9)
-    1.2
-    """
-    path = excess + spacing
-    return 0.5 * (forward + np.sqrt(np.maximum(forward * forward - spacing * spacing + path * path, 0.0)))
 
 
 def zero_runs(x: np.ndarray, min_len: int) -> np.ndarray:
