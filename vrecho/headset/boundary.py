@@ -646,7 +646,7 @@ class BoundaryMonitor:
                     id(tr) in provisional and tr.ahead_with(t_pulse, provisional[id(tr)], self.miss_m, self._still))):
                 self._oldest_approach = min(self._oldest_approach, tr.approached_at)
                 level = self._level_for(d_now, ttc)
-            elif (len(tr.times) >= 5 and closing >= 0.5 and at - tr.times[-5] < 0.25 and tr.confirmed
+            elif (len(tr.times) >= 8 and closing >= 0.5 and at - tr.times[-8] < 0.4 and tr.confirmed
                   and d_now < self.caution_m and ttc < 0.75):
                 # Not yet known to be in the way (the fit needs a third of a second of steady walking),
                 # but near, nearing fast and steadily: a surface rushed at from close by still warns.

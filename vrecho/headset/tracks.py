@@ -168,7 +168,8 @@ class Track:
                 r = d - predicted
                 # A surface's echo falls within about a centimetre of the prediction; a stray peak
                 # anywhere, at the pulse's density of peaks.
-                self.score = min(self.score + _LOG_NORM - 0.5 * (r / _SIGMA_M) ** 2 - np.log(clutter), 30.0)
+                score = self.score + _LOG_NORM - 0.5 * (r / _SIGMA_M) ** 2 - np.log(clutter)
+                self.score = min(max(score, -10.0), 30.0)  # (bounded: the last half second or so tells)
                 n = len(self.times) - 1  # residuals so far, this one included: their mean, then a running one
                 self.jitter = r * r if n == 1 else self.jitter + max(0.2, 1.0 / n) * (r * r - self.jitter)
                 self.d_hat = predicted + alpha * r
