@@ -161,6 +161,23 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--quiet", action="store_true", help="no progress bars or step lines (the table is printed)")
     d.set_defaults(func=lambda a: app.demo(a.out, scene=a.scene, html=a.html, browser=not a.no_browser,
                                             seed=a.seed, serve=a.serve, progress=not a.quiet))
+
+    w = sub.add_parser("watch", help="the headset call live on this computer's sound card",
+                       description="Play the headset call's probe on the loudspeaker and listen on the microphone "
+                                   "(a full-duplex stream): print each change of the alert (clear, caution, stop) with "
+                                   "the distance and the surface, and the stream's round trip once found. Ctrl-C stops.")
+    w.add_argument("--device", default=None,
+                   help="the sound device: a number or part of its name (default: the system's default device)")
+    w.add_argument("--samplerate", type=int, default=48000, help="44100 or 48000 Hz (default: 48000)")
+    w.add_argument("--blocksize", type=int, default=0,
+                   help="frames per callback, up to 4096 (default: 0, the audio system's choice)")
+    w.add_argument("--mic-offset", type=float, default=0.07, metavar="M",
+                   help="loudspeaker to microphone in metres, as the maker gives it (default 0.07; a laptop: 0.1 to 0.3)")
+    w.add_argument("--seconds", type=float, default=None, help="stop after this long (default: until Ctrl-C)")
+    w.add_argument("--list-devices", action="store_true", help="list the sound devices and exit")
+    w.set_defaults(func=lambda a: print(app.list_devices()) if a.list_devices else app.watch(
+        device=int(a.device) if a.device is not None and a.device.isdigit() else a.device, samplerate=a.samplerate,
+        blocksize=a.blocksize, mic_offset_m=a.mic_offset, seconds=a.seconds))
     return parser
 
 
