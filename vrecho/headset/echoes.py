@@ -141,15 +141,12 @@ class EchoFinder:
     def _own_lobes_out(self, span: np.ndarray, peaks: np.ndarray) -> np.ndarray:
         """The peaks less those that are a stronger peak's own sidelobes: within reach of it and
         no stronger, relative to it, than the codes' autocorrelation there (6 dB of slack)."""
-        level = span[peaks].tolist()
-        lags = peaks.tolist()
-        reach = len(self._lobes)
-        keep = []
-        for i in sorted(range(len(lags)), key=level.__getitem__, reverse=True):
-            if not any(abs(lags[i] - lags[j]) < reach and level[i] <= level[j] * self._lobes[abs(lags[i] - lags[j])]
-                       for j in keep):
-                keep.append(i)
-        return peaks[sorted(keep)]
+        level = span[peaks]
+        apart = np.abs(peaks[:, None] - peaks[None, :])
+        lobe = self._lobes[np.minimum(apart, len(self._lobes) - 1)]
+        lobe[apart >= len(self._lobes)] = 0.0
+        below = (level[:, None] < level[None, :]) & (level[:, None] <= level[None, :] * lobe)
+        return peaks[~below.any(axis=1)]
 
 
 def mic_geometry(mic_offset_m) -> tuple[float, float]:

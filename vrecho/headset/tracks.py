@@ -314,9 +314,13 @@ class Track:
                 continue
             p2, p1, p0, inv, rss, resid = fit
             # An echo of another surface taken where two crossed in range: refit without the
-            # points that stray more than four times the residuals' median spread (and 5 mm).
-            spread = 4.0 * 1.4826 * sorted(abs(r) for r in resid)[n // 2]
-            keep = [i for i in range(n) if abs(resid[i]) <= max(spread, 0.01 * ys[i] ** 0.5)]
+            # points that stray more than four times the residuals' median spread (and 5 mm:
+            # a residual of d^2 is some 2 d times one of d).
+            if any(abs(r) > 0.01 * y ** 0.5 for r, y in zip(resid, ys)):
+                spread = 4.0 * 1.4826 * sorted(abs(r) for r in resid)[n // 2]
+                keep = [i for i in range(n) if abs(resid[i]) <= max(spread, 0.01 * ys[i] ** 0.5)]
+            else:
+                keep = ()
             if 8 <= len(keep) < n:
                 fit = _quadratic([us[i] for i in keep], [ys[i] for i in keep])
                 if fit is None:
