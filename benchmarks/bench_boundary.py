@@ -186,7 +186,7 @@ def _steps(rng, duration_s: float) -> tuple:
 def stream_for(row: str, rng: np.random.Generator, duration_s: float) -> dict:
     """The row's audio link, ambient noise, other headsets, blocks and disturbance."""
     link = AudioLink(float(rng.uniform(0.0, 0.03)), float(rng.uniform(0.2, 0.8)))
-    out = {"link": link, "ambient": None, "others": 0, "blocks": (480, 481), "disturbed": False}
+    out = {"link": link, "ambient": None, "ambient_db": None, "others": 0, "blocks": (480, 481), "disturbed": False}
     if row.startswith("latency 30"):
         out["link"] = AudioLink(float(rng.uniform(0.03, 0.1)), link.output_share)
     elif row.startswith("latency 100"):
@@ -199,7 +199,7 @@ def stream_for(row: str, rng: np.random.Generator, duration_s: float) -> dict:
     elif row == "other headsets":
         out["others"] = int(rng.integers(1, 3))
     elif row == "noise":
-        out["ambient"] = str(rng.choice(AMBIENT_KINDS))
+        out["ambient"], out["ambient_db"] = str(rng.choice(AMBIENT_KINDS)), float(rng.uniform(0, 30))
     elif row == "block 64":
         out["blocks"] = (64, 65)
     elif row == "block 2048":
@@ -209,7 +209,8 @@ def stream_for(row: str, rng: np.random.Generator, duration_s: float) -> dict:
     elif row == "all at once":
         out.update(link=AudioLink(float(rng.uniform(0.0, 0.3)), link.output_share, _steps(rng, duration_s),
                                   float(rng.choice([-1, 1]) * rng.uniform(0, 100))),
-                   ambient=str(rng.choice(AMBIENT_KINDS)), others=3 if rng.random() < 0.3 else 2, blocks=(16, 4097),
+                   ambient=str(rng.choice(AMBIENT_KINDS)), ambient_db=float(rng.uniform(0, 30)),
+                   others=3 if rng.random() < 0.3 else 2, blocks=(16, 4097),
                    disturbed=True)
     return out
 
@@ -340,11 +341,13 @@ def bench_one(args) -> list[dict]:
             r = np.random.default_rng([seed, k, ROWS.index(row) if row in ROWS else 99, KINDS.index(kind)])
             spec = stream_for(row, r, len(walk.written) * 0.04)
             others = other_headsets(walk, spec["others"], r) if spec["others"] else None
-            rec = record_walk(walk, r, link=spec["link"], ambient=spec["ambient"], others=others)
+            rec = record_walk(walk, r, link=spec["link"], ambient=spec["ambient"], ambient_db=spec["ambient_db"],
+                              others=others)
             mic = headsets[headset_name].mic_offset_m
             res = run_walk(rec, kind, wseed, mic, spec, r, frames)
             out.append({"room": k, "row": row, "kind": kind, "speed": speeds[kind], "fs": fs,
-                        "latency_s": spec["link"].latency_s, **res})
+                        "latency_s": spec["link"].latency_s, "ambient": spec["ambient"], "ambient_db": spec["ambient_db"],
+                        "headset": headsets[headset_name].__dict__ if headset_name != "reference" else None, **res})
     return out
 
 
@@ -436,8 +439,9 @@ def failures(rows_out: list[dict]) -> list[str]:
     for r in rows_out:
         if r["kind"] in CLOSED and not (r["first_alert"] and r["first_alert"]["distance_m"] >= 0.5):
             said = f"alert at {r['first_alert']['distance_m']:.2f} m" if r["first_alert"] else "no alert"
+            noise = f", {r['ambient']} {r['ambient_db']:.0f} dB down" if r.get("ambient") else ""
             out.append(f"  missed: {r['row']}, room {r['room']} {r['kind']} {r['speed']:.1f} m/s, "
-                       f"latency {r['latency_s'] * 1e3:.0f} ms: {said}")
+                       f"latency {r['latency_s'] * 1e3:.0f} ms{noise}: {said}")
         elif r["kind"] not in CLOSED and r["first_alert"]:
             out.append(f"  false alarm: {r['row']}, room {r['room']} {r['kind']} {r['speed']:.1f} m/s, latency "
                        f"{r['latency_s'] * 1e3:.0f} ms: {r['first_alert']['level']} at {r['first_alert']['t']:.2f} s")

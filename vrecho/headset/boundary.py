@@ -659,10 +659,12 @@ class BoundaryMonitor:
                     id(tr) in provisional and tr.ahead_with(t_pulse, provisional[id(tr)], self.miss_m, self._still))):
                 self._oldest_approach = min(self._oldest_approach, tr.approached_at)
                 level = self._level_for(d_now, ttc)
-            elif (len(tr.times) >= 8 and closing >= 0.5 and at - tr.times[-8] < 0.4 and tr.confirmed
-                  and d_now < self.caution_m and ttc < 0.75):
+            elif (len(tr.times) >= 5 and closing >= 0.5 and at - tr.times[-5] < 0.25 and tr.score >= _LOOMING
+                  and d < self.caution_m and d / closing < 0.75):
                 # Not yet known to be in the way (the fit needs a third of a second of steady walking),
-                # but near, nearing fast and steadily: a surface rushed at from close by still warns.
+                # but near, nearing fast and steadily beyond doubt (stray peaks can line up for a few
+                # pulses where they are dense: the score weighs that): a surface rushed at from close by,
+                # or heard late, still warns (as measured: not reckoned on by the echo's age).
                 level = "caution"
             else:
                 continue  # not known to be in the way (asked again with the echo still arriving, if any)
@@ -688,7 +690,10 @@ class BoundaryMonitor:
 
 _RANK = {"clear": 0, "caution": 1, "stop": 2}
 _TRUE = np.ones(8192, bool)  # every sample sound: the usual block's mask, never written to
-_STAGE = 192
-"""Blocks of fewer samples than this are gathered until they make that many (4 ms at 48 kHz:
+_LOOMING = 12.0
+"""The track score (its echoes' log-likelihood ratio against stray peaks) from which a surface
+nearing fast and close cautions before the fit says it is in the way."""
+_STAGE = 441
+"""Blocks of fewer samples than this are gathered until they make that many (10 ms at 44.1 kHz:
 the work done per block, checking it and looking for what is due, costs the same for 16
 samples as for 480)."""
