@@ -553,31 +553,31 @@ class BoundaryMonitor:
 
     def _associate(self, t: float, echoes) -> list[tuple[Track | None, float, float]]:
         """Each echo with a track whose prediction lies within its gate (:attr:`Track.gate_m`), or
-        None (a new surface): the
-        closest pairs first, so a stray peak beside a surface's echo (another headset's ping)
-        never takes its track. Of the echoes left, those within 3 cm of another are one surface
-        (the strongest kept), and none is kept within 3 cm of a track's echo."""
-        predicted = sorted((tr.predict(t), i) for i, tr in enumerate(self._tracks))
-        at = [d for d, _ in predicted]  # ascending, plain floats
-        gates = [self._tracks[i].gate_m for _, i in predicted]
+        None (a new surface): the closest pairs first, so a stray peak beside a surface's echo
+        (another headset's ping) never takes its track. Of the echoes left, those within 3 cm of
+        another are one surface (the strongest kept), and none is kept within 3 cm of a track's
+        echo."""
         echoes = sorted(echoes)
-        pairs = []
-        for j, (d, _) in enumerate(echoes):
-            for i in range(bisect.bisect_left(at, d - 0.12), bisect.bisect_right(at, d + 0.12)):
-                gap = abs(at[i] - d)
-                if gap < gates[i]:
-                    pairs.append((gap, j, predicted[i][1]))
-        pairs.sort()
+        tracks = self._tracks
         track_of: dict[int, int] = {}
-        taken = set()
-        for _, j, i in pairs:
-            if j not in track_of and i not in taken:
-                track_of[j] = i
-                taken.add(i)
-        out = [(self._tracks[i], echoes[j][0], echoes[j][1]) for j, i in track_of.items()]
+        if tracks and echoes:
+            predicted = np.array([tr.d_hat + (tr.speed or 0.0) * (t - tr.times[-1]) for tr in tracks])
+            gates = np.array([tr.gate_m for tr in tracks])
+            gap = np.abs(np.array([d for d, _ in echoes])[:, None] - predicted[None, :])
+            js, iis = np.nonzero(gap < gates[None, :])
+            if len(js):
+                taken = set()
+                for k in np.argsort(gap[js, iis], kind="stable").tolist():
+                    j, i = int(js[k]), int(iis[k])
+                    if j not in track_of and i not in taken:
+                        track_of[j] = i
+                        taken.add(i)
+        out = [(tracks[i], echoes[j][0], echoes[j][1]) for j, i in track_of.items()]
         claimed = sorted(d for _, d, _ in out)
         new = []
-        for d, strength in sorted(echoes[j] for j in range(len(echoes)) if j not in track_of):
+        for j, (d, strength) in enumerate(echoes):
+            if j in track_of:
+                continue
             c = bisect.bisect_left(claimed, d)
             if (c < len(claimed) and claimed[c] - d < 0.03) or (c > 0 and d - claimed[c - 1] < 0.03):
                 continue
@@ -647,8 +647,8 @@ class BoundaryMonitor:
         self._oldest_approach = np.inf
         self._judge_at = np.inf
         for tr in self._tracks:
-            if tr.ahead is False:
-                continue
+            if tr.ahead is False or (not tr.ahead and id(tr) not in provisional and (tr.speed or 0.0) > -0.5):
+                continue  # (neither in the way, nor asked again, nor nearing fast: most surfaces, cheaply)
             v = tr.speed
             d = provisional.get(id(tr), tr.dists[-1])
             at = t_pulse if id(tr) in provisional else tr.times[-1]

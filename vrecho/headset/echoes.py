@@ -129,8 +129,8 @@ class EchoFinder:
         # The direct sound's matched-filter sidelobes fall off with lag; an echo must rise above them too.
         peaks = above + lo - d0
         peaks = peaks[span[peaks] > peak_direct * sidelobe[peaks]]
-        if len(peaks) > 1:  # one echo per surface: its own sidelobes (10, 18, 26... samples out) are not echoes
-            peaks = self._own_lobes_out(span, peaks)
+        if len(peaks) > 1 and int(np.diff(peaks).min()) < len(self._lobes):
+            peaks = self._own_lobes_out(span, peaks)  # one echo per surface: its own sidelobes are not echoes
         if not len(peaks):
             return []
         excess = SPEED_OF_SOUND * (parabolic_peaks(span, peaks) + d0 - ref) / self.fs

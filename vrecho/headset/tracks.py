@@ -7,6 +7,7 @@ what the headset's camera made of it. :class:`~vrecho.headset.BoundaryMonitor` k
 from __future__ import annotations
 
 import bisect
+import math
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -15,10 +16,27 @@ import numpy as np
 
 _SIGMA_M = 0.01
 """How far a surface's echo strays from the track's prediction (head bob, the filter's lag)."""
-_LOG_NORM = -np.log(np.sqrt(2 * np.pi) * _SIGMA_M)
-_LOG_MISS = np.log(0.2)
-CONFIRMED = np.log(100.0)
+_LOG_NORM = -math.log(math.sqrt(2 * math.pi) * _SIGMA_M)
+_LOG_MISS = math.log(0.2)
+_LOG_QUARTER = math.log(0.25)
+_LOG_YOUNG_GATE = math.log(2 * 0.12)
+CONFIRMED = math.log(100.0)
 """A track's :attr:`~Track.score` from which its echoes count as a surface's."""
+
+
+def _solve(n, s1, s2, s3, s4, b0, b1, b2):
+    """Least squares of y on (u^2, u, 1) from its sums: (p2, p1, p0, the normal matrix's inverse),
+    or None when they do not determine a parabola."""
+    # The normal equations' matrix ((s4, s3, s2), (s3, s2, s1), (s2, s1, n)) is symmetric: its
+    # cofactors over its determinant are its inverse.
+    c00, c01, c02 = s2 * n - s1 * s1, -(s3 * n - s1 * s2), s3 * s1 - s2 * s2
+    c11, c12, c22 = s4 * n - s2 * s2, -(s4 * s1 - s3 * s2), s4 * s2 - s3 * s3
+    det = s4 * c00 + s3 * c01 + s2 * c02
+    if abs(det) < 1e-18:
+        return None
+    inv = ((c00 / det, c01 / det, c02 / det), (c01 / det, c11 / det, c12 / det), (c02 / det, c12 / det, c22 / det))
+    return (inv[0][0] * b2 + inv[0][1] * b1 + inv[0][2] * b0, inv[1][0] * b2 + inv[1][1] * b1 + inv[1][2] * b0,
+            inv[2][0] * b2 + inv[2][1] * b1 + inv[2][2] * b0, inv)
 
 
 def _quadratic(us: list, ys: list):
@@ -27,7 +45,6 @@ def _quadratic(us: list, ys: list):
     Returns (p2, p1, p0, the normal matrix's inverse, the residuals' sum of squares, the
     residuals), or None when the points do not determine a parabola.
     """
-    n = float(len(us))
     s1 = s2 = s3 = s4 = b0 = b1 = b2 = 0.0
     for u, y in zip(us, ys):
         u2 = u * u
@@ -38,17 +55,10 @@ def _quadratic(us: list, ys: list):
         b0 += y
         b1 += u * y
         b2 += u2 * y
-    # The normal equations' matrix ((s4, s3, s2), (s3, s2, s1), (s2, s1, n)) is symmetric: its
-    # cofactors over its determinant are its inverse.
-    c00, c01, c02 = s2 * n - s1 * s1, -(s3 * n - s1 * s2), s3 * s1 - s2 * s2
-    c11, c12, c22 = s4 * n - s2 * s2, -(s4 * s1 - s3 * s2), s4 * s2 - s3 * s3
-    det = s4 * c00 + s3 * c01 + s2 * c02
-    if abs(det) < 1e-18:
+    fit = _solve(float(len(us)), s1, s2, s3, s4, b0, b1, b2)
+    if fit is None:
         return None
-    inv = ((c00 / det, c01 / det, c02 / det), (c01 / det, c11 / det, c12 / det), (c02 / det, c12 / det, c22 / det))
-    p2 = inv[0][0] * b2 + inv[0][1] * b1 + inv[0][2] * b0
-    p1 = inv[1][0] * b2 + inv[1][1] * b1 + inv[1][2] * b0
-    p0 = inv[2][0] * b2 + inv[2][1] * b1 + inv[2][2] * b0
+    p2, p1, p0, inv = fit
     resid = [y - (p2 * u * u + p1 * u + p0) for u, y in zip(us, ys)]
     return p2, p1, p0, inv, sum(r * r for r in resid), resid
 
@@ -155,30 +165,34 @@ class Track:
         alpha, beta : float
             The filter's gains on distance and speed (default 0.6 and 0.3).
         """
-        clutter = max(clutter_per_m, 0.25)
-        if not self.times:
+        log_clutter = math.log(clutter_per_m) if clutter_per_m > 0.25 else _LOG_QUARTER  # (plain floats: per echo)
+        times = self.times
+        if not times:
             self.d_hat, self.speed = d, None
         else:
-            dt = t - self.times[-1]
+            dt = t - times[-1]
+            if dt < 1e-3:
+                dt = 1e-3
             if self.speed is None:  # the second echo: the speed from the two (a fast walk's echo moves ~8 cm a pulse)
-                self.d_hat, self.speed = d, (d - self.d_hat) / max(dt, 1e-3)
-                self.score += np.log(1.0 / (2 * 0.12 * clutter))  # anywhere within the young gate
+                self.d_hat, self.speed = d, (d - self.d_hat) / dt
+                self.score -= _LOG_YOUNG_GATE + log_clutter  # anywhere within the young gate
             else:
-                predicted = self.predict(t)
+                predicted = self.d_hat + self.speed * dt
                 r = d - predicted
                 # A surface's echo falls within about a centimetre of the prediction; a stray peak
-                # anywhere, at the pulse's density of peaks.
-                score = self.score + _LOG_NORM - 0.5 * (r / _SIGMA_M) ** 2 - np.log(clutter)
-                self.score = min(max(score, -10.0), 30.0)  # (bounded: the last half second or so tells)
-                n = len(self.times) - 1  # residuals so far, this one included: their mean, then a running one
-                self.jitter = r * r if n == 1 else self.jitter + max(0.2, 1.0 / n) * (r * r - self.jitter)
+                # anywhere, at the pulse's density of peaks. (Bounded: the last half second tells.)
+                score = self.score + _LOG_NORM - 0.5 * (r / _SIGMA_M) ** 2 - log_clutter
+                self.score = -10.0 if score < -10.0 else 30.0 if score > 30.0 else score
+                n = len(times) - 1  # residuals so far, this one included: their mean, then a running one
+                self.jitter = r * r if n == 1 else self.jitter + (0.2 if n > 5 else 1.0 / n) * (r * r - self.jitter)
                 self.d_hat = predicted + alpha * r
-                self.speed += beta * r / max(dt, 1e-3)
-        self.times.append(t)
+                self.speed += beta * r / dt
+        times.append(t)
         self.dists.append(d)
         self.strengths.append(strength)
-        if len(self.times) >= 5:
-            self.gate_m = min(0.12, max(0.04, 5.0 * self.jitter ** 0.5))
+        if len(times) >= 5:
+            gate = 5.0 * self.jitter ** 0.5
+            self.gate_m = 0.04 if gate < 0.04 else 0.12 if gate > 0.12 else gate
 
     def _history(self, extra=None):
         """The track's times and distances, with one more point ``extra`` = (t, d) if given."""
@@ -298,35 +312,48 @@ class Track:
         """
         times, dists = self._history(extra)
         t_last = times[-1]
-        longest = max(spans_s)
-        us, ys = [], []  # the last points, newest first: time from the last point, y = d^2
+        # One backward pass in plain floats over the last points (some 15 a span), keeping each
+        # span's sums as the pass reaches its first point.
+        sums = {}
+        acc = [0.0] * 9  # n, sum u, u^2, u^3, u^4, y, u y, u^2 y, y^2 (u: time from the last point, y = d^2)
+        bounds = sorted(spans_s)
+        u = 0.0
         for t, d in zip(reversed(times), reversed(dists)):
-            if t < t_last - longest:
+            while bounds and t < t_last - bounds[0]:  # past the shortest open span's start
+                sums[bounds.pop(0)] = (tuple(acc), -u)
+            if not bounds:
                 break
-            us.append(t - t_last)
-            ys.append(d * d)
+            u = t - t_last
+            u2, y = u * u, d * d
+            acc[0] += 1.0
+            acc[1] += u
+            acc[2] += u2
+            acc[3] += u2 * u
+            acc[4] += u2 * u2
+            acc[5] += y
+            acc[6] += u * y
+            acc[7] += u2 * y
+            acc[8] += y * y
+        for span_s in bounds:  # spans longer than the track
+            sums[span_s] = (tuple(acc), -u)
         for span_s in spans_s:
-            n = sum(1 for u in us if u >= -span_s)
-            if n < 8 or -us[n - 1] < 0.9 * span_s:
+            (n, s1, s2, s3, s4, b0, b1, b2, yy), reach = sums[span_s]
+            if reach < 0.9 * span_s or n < 8:
                 continue
-            fit = _quadratic(us[:n], ys[:n])
+            fit = _solve(n, s1, s2, s3, s4, b0, b1, b2)
             if fit is None:
                 continue
-            p2, p1, p0, inv, rss, resid = fit
-            # An echo of another surface taken where two crossed in range: refit without the
-            # points that stray more than four times the residuals' median spread (and 5 mm:
-            # a residual of d^2 is some 2 d times one of d).
-            if any(abs(r) > 0.01 * y ** 0.5 for r, y in zip(resid, ys)):
-                spread = 4.0 * 1.4826 * sorted(abs(r) for r in resid)[n // 2]
-                keep = [i for i in range(n) if abs(resid[i]) <= max(spread, 0.01 * ys[i] ** 0.5)]
-            else:
-                keep = ()
-            if 8 <= len(keep) < n:
-                fit = _quadratic([us[i] for i in keep], [ys[i] for i in keep])
-                if fit is None:
+            p2, p1, p0, inv = fit
+            rss = max(yy - (p2 * b2 + p1 * b1 + p0 * b0), 0.0)
+            # An echo of another surface taken where two crossed in range strays from the
+            # others: when the fit's residual says one may (over 4 mm rms, a residual of d^2 being
+            # some 2 d times one of d), refit without the points beyond four times the residuals'
+            # median spread (and 5 mm).
+            if rss > 6.4e-5 * b0:  # (rss / n > (2 d 4 mm)^2, d^2 ~ b0 / n)
+                refit = self._robust(times, dists, t_last, span_s)
+                if refit is None:
                     continue
-                p2, p1, p0, inv, rss, _ = fit
-                n = len(keep)
+                p2, p1, p0, inv, rss, n = refit
             if p2 <= 1e-3:  # not nearing at a steady pace (starting, stopping): cannot tell yet
                 continue
             g = (p1 ** 2 / (4 * p2 ** 2), -p1 / (2 * p2), 1.0)
@@ -338,3 +365,27 @@ class Track:
             if a2 - 2 * sigma > miss_m ** 2:
                 return False
         return None
+
+    @staticmethod
+    def _robust(times, dists, t_last: float, span_s: float):
+        """The span's fit without its stray points: (p2, p1, p0, inverse, rss, n) or None."""
+        us, ys = [], []
+        for t, d in zip(reversed(times), reversed(dists)):
+            if t < t_last - span_s:
+                break
+            us.append(t - t_last)
+            ys.append(d * d)
+        fit = _quadratic(us, ys)
+        if fit is None:
+            return None
+        p2, p1, p0, inv, rss, resid = fit
+        n = len(us)
+        spread = 4.0 * 1.4826 * sorted(abs(r) for r in resid)[n // 2]
+        keep = [i for i in range(n) if abs(resid[i]) <= max(spread, 0.01 * ys[i] ** 0.5)]
+        if 8 <= len(keep) < n:
+            fit = _quadratic([us[i] for i in keep], [ys[i] for i in keep])
+            if fit is None:
+                return None
+            p2, p1, p0, inv, rss, _ = fit
+            n = len(keep)
+        return p2, p1, p0, inv, rss, n
