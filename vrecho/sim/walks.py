@@ -315,8 +315,9 @@ def walk_responses(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps:
         fwd = np.array([c * heading[0] - sn * heading[1], sn * heading[0] + c * heading[1], 0.0])
         frame = headset.world(fwd)
         mic = pos + frame @ np.asarray(headset.mic_offset_m, float)
-        if not scene.room.contains(np.array([pos, mic])).all():
-            raise VrechoError(f"walk: the headset leaves the room at pulse {k} ({np.round(pos, 2).tolist()})")
+        if not scene.room.contains(np.array([pos, mic])).all() or any(
+                f.contains(np.array([pos, mic]), margin_m=0.02).any() for f in scene.furniture):
+            raise VrechoError(f"walk: the headset leaves the room's air at pulse {k} ({np.round(pos, 2).tolist()})")
         room = build_room(scene, fs, sim=WALK_SIMULATION)  # pyroomacoustics keeps per-source state
         directivity = None if p_speaker >= 1.0 else emitter_directivity(frame @ np.asarray(headset.speaker_axis, float),
                                                                         p_speaker)
