@@ -226,7 +226,12 @@ class BoundaryMonitor:
         self._lock = RoundTrip(self.schedule, max_latency_s, int(0.002 * fs))
         size = 1 << int(np.ceil(np.log2(self._lock.max + 4 * (self.period + self.schedule.dither) + self.window)))
         self._env = Envelope(probes, size)
-        self._now = 0  # samples received so far (= samples played: one clock)
+        self._now = 0  # samples processed so far (the microphone's clock)
+        self._written = 0  # samples written to the loudspeaker (= received from the microphone, staged ones too)
+        self._staged = 0  # samples received but not yet processed (small blocks, gathered in _stage)
+        self._clipped_at = -(1 << 40)  # the sample at which a block last came clipped
+        self._alerted = None  # the verdict the last alert told, when that alert had no flags of its own
+        self._announced = "clear"  # the level on_alert was last called with
         self._judged = 0  # samples received at the last judgement
         self._searched = -self.period  # samples received at the last search for the round trip
         self._next = 0  # the next pulse to commit
@@ -365,12 +370,6 @@ class BoundaryMonitor:
             self._announced = self._alert.level
             self.on_alert(self._alert)
         return self._alert
-
-    _announced = "clear"
-    _written = 0  # samples written to the loudspeaker (= received from the microphone, staged ones too)
-    _staged = 0  # samples received but not yet processed (small blocks, gathered in _stage)
-    _clipped_at = -(1 << 40)  # the sample at which a block last came clipped
-    _alerted = None  # the verdict the last alert told, when that alert had no flags of its own
 
     def speaker_block(self, n: int) -> np.ndarray:
         """The loudspeaker's next ``n`` samples (:attr:`schedule`'s pulses).
