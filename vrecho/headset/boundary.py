@@ -60,7 +60,6 @@ cameras alone cannot find glass: it takes both.
 
 from __future__ import annotations
 
-import bisect
 from dataclasses import dataclass
 
 import numpy as np
@@ -70,7 +69,7 @@ from ..signals import SPEED_OF_SOUND
 from .echoes import EchoFinder, echo_path, mic_geometry
 from .ranging import GUARD, Envelope, ProbeSchedule, clipped, probe_codes, zero_runs
 from .roundtrip import RoundTrip
-from .tracks import Track
+from .tracks import Track, associate
 from .view import look_all
 
 
@@ -550,52 +549,16 @@ class BoundaryMonitor:
                     out.append(lag)
         return out
 
-    def _associate(self, t: float, echoes) -> list[tuple[Track | None, float, float]]:
-        """Each echo with a track whose prediction lies within its gate (:attr:`Track.gate_m`), or
-        None (a new surface): the closest pairs first, so a stray peak beside a surface's echo
-        (another headset's ping) never takes its track. Of the echoes left, those within 3 cm of
-        another are one surface (the strongest kept), and none is kept within 3 cm of a track's
-        echo."""
-        echoes = sorted(echoes)
-        tracks = self._tracks
-        track_of: dict[int, int] = {}
-        if tracks and echoes:
-            predicted = np.array([tr.d_hat + (tr.speed or 0.0) * (t - tr.times[-1]) for tr in tracks])
-            gates = np.array([tr.gate_m for tr in tracks])
-            gap = np.abs(np.array([d for d, _ in echoes])[:, None] - predicted[None, :])
-            js, iis = np.nonzero(gap < gates[None, :])
-            if len(js):
-                taken = set()
-                for k in np.argsort(gap[js, iis], kind="stable").tolist():
-                    j, i = int(js[k]), int(iis[k])
-                    if j not in track_of and i not in taken:
-                        track_of[j] = i
-                        taken.add(i)
-        out = [(tracks[i], echoes[j][0], echoes[j][1]) for j, i in track_of.items()]
-        claimed = sorted(d for _, d, _ in out)
-        new = []
-        for j, (d, strength) in enumerate(echoes):
-            if j in track_of:
-                continue
-            c = bisect.bisect_left(claimed, d)
-            if (c < len(claimed) and claimed[c] - d < 0.03) or (c > 0 and d - claimed[c - 1] < 0.03):
-                continue
-            if new and d - new[-1][1] < 0.03:
-                if strength > new[-1][2]:
-                    new[-1] = (None, d, strength)
-                continue
-            new.append((None, d, strength))
-        return out + new
-
     def _commit(self, t: float, echoes) -> None:
         """Add the echoes of the pulse emitted at ``t`` (seconds) to the tracks."""
         updated = []
         clutter = len(echoes) / (self.max_range_m - self.min_range_m)  # peaks per metre in this pulse
-        for tr, d, strength in self._associate(t, echoes):
+        mean_strength = sum(a for _, a in echoes) / len(echoes) if len(echoes) >= 4 else 0.0  # (few: not weighed)
+        for tr, d, strength in associate(self._tracks, t, echoes):
             if tr is None:
                 tr = Track()
                 self._tracks.append(tr)
-            tr.update(t, d, strength, clutter_per_m=clutter)
+            tr.update(t, d, strength, clutter_per_m=clutter, clutter_strength=mean_strength)
             if tr.closed_in(0.8) >= self.approach_m:
                 tr.approached_at = t
             updated.append(tr)
@@ -618,9 +581,12 @@ class BoundaryMonitor:
                     tr.ahead = False
                 elif tr.ahead is None and was:  # once in the way, until the fit says it passes by (or not a surface)
                     tr.ahead = True
-        self._tracks = [tr for tr in self._tracks if t - tr.times[-1] <= 0.3]
-        if len(self._tracks) > 32:  # clutter: keep the surfaces followed longest, then the nearest
-            self._tracks = sorted(self._tracks, key=lambda tr: (-min(len(tr.times), 8), tr.dists[-1]))[:32]
+        # Dropped: a track not heard for 0.3 s, and one whose echoes have shown over five pulses and
+        # more to be stray peaks (its score at the floor): it would claim the peaks a surface passing
+        # through its gate gives (dense where other headsets ping).
+        self._tracks = [tr for tr in self._tracks if t - tr.times[-1] <= 0.3 and (tr.score > -10.0 or len(tr.times) < 5)]
+        if len(self._tracks) > 32:  # clutter: keep the likeliest surfaces, then the nearest
+            self._tracks = sorted(self._tracks, key=lambda tr: (-tr.score, tr.dists[-1]))[:32]
 
     def _level_for(self, d: float, ttc: float) -> str:
         """The alert a surface at ``d`` m, ``ttc`` s from contact calls for, with hysteresis
@@ -640,7 +606,7 @@ class BoundaryMonitor:
         best = None
         provisional = {}
         if partial:  # echoes of the pulse still arriving: the alert may not wait for the window's end
-            for tr, d, _ in self._associate(t_pulse, partial):
+            for tr, d, _ in associate(self._tracks, t_pulse, partial):
                 if tr is not None and tr.confirmed:  # (a surface, not stray peaks: see _commit)
                     provisional[id(tr)] = d
         self._oldest_approach = np.inf

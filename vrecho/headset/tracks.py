@@ -1,7 +1,8 @@
 """A surface the headset's echoes follow over pulses (:class:`Track`): its distance and closing
 speed (an alpha-beta filter), whether it lies in the wearer's way (the closest point of approach,
 :meth:`Track.in_the_way`) or is a second-order echo passing by (:meth:`Track.explained_by`), and
-what the headset's camera made of it. :class:`~vrecho.headset.BoundaryMonitor` keeps them.
+what the headset's camera made of it. :class:`~vrecho.headset.BoundaryMonitor` keeps them, and
+gives each pulse's echoes to them with :func:`associate`.
 """
 
 from __future__ import annotations
@@ -14,14 +15,42 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
-_SIGMA_M = 0.01
+SIGMA_M = 0.01
 """How far a surface's echo strays from the track's prediction (head bob, the filter's lag)."""
-_LOG_NORM = -math.log(math.sqrt(2 * math.pi) * _SIGMA_M)
+_LOG_NORM = -math.log(math.sqrt(2 * math.pi) * SIGMA_M)
 _LOG_MISS = math.log(0.2)
 _LOG_QUARTER = math.log(0.25)
 _LOG_YOUNG_GATE = math.log(2 * 0.12)
 CONFIRMED = math.log(100.0)
 """A track's :attr:`~Track.score` from which its echoes count as a surface's."""
+
+
+def amplitude_llr(strength: float, clutter_strength: float) -> float:
+    """The evidence an echo's strength gives that it is a surface's and not a stray peak.
+
+    Stray peaks' strengths fall off as an exponential from their mean ``m``; a surface's echo is
+    as likely at any strength up to a few times that: the log-likelihood ratio is ``a / m - 1``
+    (0 on average for stray peaks), bounded to [-1, 3] (one echo never decides alone).
+
+    Parameters
+    ----------
+    strength : float
+        The echo's peak as a share of the direct sound's.
+    clutter_strength : float
+        The mean of its pulse's peaks' strengths (> 0).
+
+    Returns
+    -------
+    float
+        Nats.
+
+    Examples
+    --------
+    >>> amplitude_llr(0.02, 0.02), amplitude_llr(0.08, 0.02), amplitude_llr(0.001, 0.02)
+    (0.0, 3.0, -0.95)
+    """
+    x = strength / clutter_strength - 1.0
+    return -1.0 if x < -1.0 else 3.0 if x > 3.0 else x
 
 
 def _solve(n, s1, s2, s3, s4, b0, b1, b2):
@@ -142,8 +171,8 @@ class Track:
         times in five)."""
         self.score = max(self.score + _LOG_MISS, -10.0)
 
-    def update(self, t: float, d: float, strength: float, *, clutter_per_m: float = 1.0, alpha: float = 0.6,
-               beta: float = 0.3) -> None:
+    def update(self, t: float, d: float, strength: float, *, clutter_per_m: float = 1.0, clutter_strength: float = 0.0,
+               alpha: float = 0.6, beta: float = 0.3) -> None:
         """Add one echo: an alpha-beta filter of distance and speed, and the raw history.
 
         The filter follows a wearer who starts or stops walking within a few pulses. The first
@@ -162,6 +191,10 @@ class Track:
             Stray peaks per metre of range in this pulse (its echoes over the range looked at):
             the score weighs how near the prediction the echo fell against how likely a stray
             peak is to fall as near.
+        clutter_strength : float
+            The mean strength of this pulse's peaks (0: not weighed). Stray peaks' strengths
+            spread about their mean as a noise's envelope peaks do (an exponential tail); a
+            surface's echo standing out above them is weighed as evidence (:func:`amplitude_llr`).
         alpha, beta : float
             The filter's gains on distance and speed (default 0.6 and 0.3).
         """
@@ -181,7 +214,9 @@ class Track:
                 r = d - predicted
                 # A surface's echo falls within about a centimetre of the prediction; a stray peak
                 # anywhere, at the pulse's density of peaks. (Bounded: the last half second tells.)
-                score = self.score + _LOG_NORM - 0.5 * (r / _SIGMA_M) ** 2 - log_clutter
+                score = self.score + _LOG_NORM - 0.5 * (r / SIGMA_M) ** 2 - log_clutter
+                if clutter_strength > 0.0:
+                    score += amplitude_llr(strength, clutter_strength)
                 self.score = -10.0 if score < -10.0 else 30.0 if score > 30.0 else score
                 n = len(times) - 1  # residuals so far, this one included: their mean, then a running one
                 self.jitter = r * r if n == 1 else self.jitter + (0.2 if n > 5 else 1.0 / n) * (r * r - self.jitter)
@@ -389,3 +424,60 @@ class Track:
             p2, p1, p0, inv, rss, _ = fit
             n = len(keep)
         return p2, p1, p0, inv, rss, n
+
+
+def associate(tracks: list, t: float, echoes) -> list[tuple[Track | None, float, float]]:
+    """Each echo with a track whose prediction lies within its gate (:attr:`Track.gate_m`), or
+    None (a new surface): the likeliest pairs first (nearest the prediction and, among many
+    peaks, standing out: :func:`amplitude_llr`), so a stray peak beside a surface's echo
+    (another headset's ping) seldom takes its track. Of the echoes left, those within 3 cm of
+    another are one surface (the strongest kept), and none is kept within 3 cm of a track's echo.
+
+    Parameters
+    ----------
+    tracks : list of Track
+        The surfaces followed.
+    t : float
+        When the echoes' pulse was emitted, in seconds.
+    echoes : list of (float, float)
+        Each echo's distance in metres and strength (:meth:`EchoFinder.find
+        <vrecho.headset.echoes.EchoFinder.find>`).
+
+    Returns
+    -------
+    list of (Track or None, float, float)
+        The track (None: a new surface), distance and strength of each echo kept.
+    """
+    echoes = sorted(echoes)
+    track_of: dict[int, int] = {}
+    if tracks and echoes:
+        predicted = np.array([tr.d_hat + (tr.speed or 0.0) * (t - tr.times[-1]) for tr in tracks])
+        gates = np.array([tr.gate_m for tr in tracks])
+        gap = np.abs(np.array([d for d, _ in echoes])[:, None] - predicted[None, :])
+        js, iis = np.nonzero(gap < gates[None, :])
+        if len(js):
+            taken = set()
+            cost = 0.5 * (gap[js, iis] / SIGMA_M) ** 2  # (the score's terms: see Track.update)
+            if len(echoes) >= 4:
+                mean = sum(a for _, a in echoes) / len(echoes)
+                cost -= np.array([amplitude_llr(echoes[j][1], mean) for j in js.tolist()])
+            for k in np.argsort(cost, kind="stable").tolist():
+                j, i = int(js[k]), int(iis[k])
+                if j not in track_of and i not in taken:
+                    track_of[j] = i
+                    taken.add(i)
+    out = [(tracks[i], echoes[j][0], echoes[j][1]) for j, i in track_of.items()]
+    claimed = sorted(d for _, d, _ in out)
+    new = []
+    for j, (d, strength) in enumerate(echoes):
+        if j in track_of:
+            continue
+        c = bisect.bisect_left(claimed, d)
+        if (c < len(claimed) and claimed[c] - d < 0.03) or (c > 0 and d - claimed[c - 1] < 0.03):
+            continue
+        if new and d - new[-1][1] < 0.03:
+            if strength > new[-1][2]:
+                new[-1] = (None, d, strength)
+            continue
+        new.append((None, d, strength))
+    return out + new
