@@ -179,11 +179,17 @@ def walk_past(scene, rng: np.random.Generator, speed: float, furniture: bool):
 
 
 # -- The rows ------------------------------------------------------------------------------------------
-def _steps(rng, duration_s: float) -> tuple:
-    out = []
+def _steps(rng, duration_s: float, latency_s: float) -> tuple:
+    """One to three steps of the round trip by one or two blocks, keeping it within 0 to 300 ms
+    (a step that would leave that range goes the other way)."""
+    out, total = [], 0
     for t in np.sort(rng.uniform(0.3, max(duration_s - 0.6, 0.4), int(rng.integers(1, 4)))):
-        block = int(rng.choice([256, 480, 512, 1024]))
-        out.append((float(t), int(rng.choice([-2, -1, 1, 1, 2])) * block))
+        step = int(rng.choice([-2, -1, 1, 1, 2])) * int(rng.choice([256, 480, 512, 1024]))
+        for s in (step, -step):
+            if 0.0 <= latency_s + (total + s) / 44100 and latency_s + (total + s) / 44100 <= 0.3:
+                out.append((float(t), s))
+                total += s
+                break
     return tuple(out)
 
 
@@ -196,7 +202,8 @@ def stream_for(row: str, rng: np.random.Generator, duration_s: float) -> dict:
     elif row.startswith("latency 100"):
         out["link"] = AudioLink(float(rng.uniform(0.1, 0.3)), link.output_share)
     elif row == "stepping latency":
-        out["link"] = AudioLink(float(rng.uniform(0.02, 0.15)), link.output_share, _steps(rng, duration_s))
+        lat = float(rng.uniform(0.02, 0.15))
+        out["link"] = AudioLink(lat, link.output_share, _steps(rng, duration_s, lat))
     elif row == "drift":
         out["link"] = AudioLink(float(rng.uniform(0.01, 0.1)), link.output_share,
                                 drift_ppm=float(rng.choice([-1, 1]) * rng.uniform(30, 100)))
@@ -211,7 +218,8 @@ def stream_for(row: str, rng: np.random.Generator, duration_s: float) -> dict:
     elif row == "disturbed":
         out["blocks"], out["disturbed"] = (16, 4097), True
     elif row == "all at once":
-        out.update(link=AudioLink(float(rng.uniform(0.0, 0.3)), link.output_share, _steps(rng, duration_s),
+        lat = float(rng.uniform(0.0, 0.3))
+        out.update(link=AudioLink(lat, link.output_share, _steps(rng, duration_s, lat),
                                   float(rng.choice([-1, 1]) * rng.uniform(0, 100))),
                    ambient=str(rng.choice(AMBIENT_KINDS)), ambient_db=float(rng.uniform(0, 30)),
                    others=3 if rng.random() < 0.3 else 2, blocks=(16, 4097),
@@ -390,8 +398,8 @@ def held_out_room(args) -> list[dict]:
             continue
         n = sch.first_at_or_after(int((0.3 + length / speed) * fs))
         written = np.array([sch.emission(j) for j in range(n)])
-        link = AudioLink(float(rng.uniform(0.0, 0.3)), float(rng.uniform(0.2, 0.8)), _steps(rng, n * 0.04),
-                         float(rng.uniform(-100, 100)))
+        lat = float(rng.uniform(0.0, 0.3))
+        link = AudioLink(lat, float(rng.uniform(0.2, 0.8)), _steps(rng, n * 0.04, lat), float(rng.uniform(-100, 100)))
         arrival = link.arrival(written, fs)
         x = np.zeros(int(arrival.max()) + 4096)
         dist = np.zeros(n)

@@ -267,6 +267,8 @@ def test_a_round_trip_that_steps_after_an_underrun_is_followed(glass_room):
     final = (0.04 * FS + 480 - 1024) / FS
     assert abs(latencies[-1] - final) < 0.0002  # (the drift: 80 ppm of the walk's 2 s)
     assert all(a.level == "clear" for a in alerts if a.latency_s is None)
+    with pytest.raises(VrechoError, match="below zero"):  # (a simulated link, too, keeps to what hardware can do)
+        AudioLink(0.01, steps=((0.5, -1024),)).arrival(np.arange(0, 48000, 1920), FS)
 
 
 @pytest.fixture(scope="module")

@@ -140,6 +140,9 @@ class AudioLink:
         delay = np.full(written.shape, self.latency_s * fs)
         for t, samples in self.steps:
             delay += np.where(written >= t * fs, samples, 0)
+        if len(delay) and delay.min() < 0:
+            raise VrechoError(f"AudioLink: its steps take the round trip below zero ({delay.min() / fs * 1e3:.1f} ms): "
+                              "a microphone cannot hear a sample before it is played")
         return written * (1 + self.drift_ppm * 1e-6) + delay
 
 
