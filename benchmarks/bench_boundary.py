@@ -488,8 +488,13 @@ def main() -> None:
         jobs = [pool.submit(bench_one, (args.seed, k, rows)) for k in range(args.rooms)]
         if args.held_out:
             jobs += [pool.submit(held_out_room, (args.seed, k)) for k in range(args.rooms)]
-        for job in tqdm(jobs, desc="rooms", unit="room"):
-            results += job.result()
+        for k, job in enumerate(tqdm(jobs, desc="rooms", unit="room")):
+            try:
+                results += job.result()
+            except Exception as e:  # (one room's failure is said, and does not cost the run)
+                room = k % args.rooms
+                results.append({"room": room, "row": "held out" if k >= args.rooms else "all", "kind": "room",
+                                "skipped": f"{type(e).__name__}: {e}"})
     print(f"\n{args.rooms} rooms (seed {args.seed}), {len(results)} walks; {platform.node()} "
           f"{time.strftime('%Y-%m-%d')}, {time.time() - started:.0f} s, {args.jobs} processes")
     print("\n".join(table(results, rows + (HELD_OUT if args.held_out else ()))))

@@ -324,9 +324,12 @@ def walk_responses(scene: Scene, start: np.ndarray, goal: np.ndarray, speed_mps:
         room = build_room(scene, fs, sim=WALK_SIMULATION)  # pyroomacoustics keeps per-source state
         directivity = None if p_speaker >= 1.0 else emitter_directivity(frame @ np.asarray(headset.speaker_axis, float),
                                                                         p_speaker)
-        room.add_source(pos, directivity=directivity)
-        room.add_microphone(mic)
-        room.compute_rir()
+        try:
+            room.add_source(pos, directivity=directivity)
+            room.add_microphone(mic)
+            room.compute_rir()
+        except ValueError as e:  # (pyroomacoustics, where its image sources find no path: said, not hidden)
+            raise VrechoError(f"walk: pyroomacoustics could not simulate pulse {k} at {np.round(pos, 2).tolist()}: {e}") from e
         out.responses.append(np.asarray(room.rir[0][0], float)[lag:lag + n_ir])
         out.distance_m[k] = abs((pos - p0) @ normal)
         out.position_m[k], out.forward[k], out.mic_m[k] = pos, fwd, mic
@@ -389,10 +392,15 @@ def other_headsets(walk: WalkResponses, n: int, rng: np.random.Generator) -> np.
             if k % 4 == 0:  # its wearer moves a few centimetres a pulse: a response every fourth
                 i = min(int(np.searchsorted(walk.written, e)), len(walk.written) - 1)
                 r = build_room(walk.scene, fs, sim=WALK_SIMULATION)
-                r.add_source(where + drift * (e / fs), directivity=None if p >= 1 else emitter_directivity(facing, p))
-                r.add_microphone(walk.mic_m[i])
-                r.compute_rir()
-                response = np.asarray(r.rir[0][0], float)[lag:lag + n_ir]
+                try:
+                    r.add_source(where + drift * (e / fs), directivity=None if p >= 1 else emitter_directivity(facing, p))
+                    r.add_microphone(walk.mic_m[i])
+                    r.compute_rir()
+                    response = np.asarray(r.rir[0][0], float)[lag:lag + n_ir]
+                except ValueError:  # pyroomacoustics' own inside test (a ray across furniture's faces) can
+                    pass  # refuse a point inside the room: the last response stands
+            if response is None:
+                continue
             seg = np.convolve(response, other.probe(k))[:total - e]
             out[e:e + len(seg)] += seg
     return out
