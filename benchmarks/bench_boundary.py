@@ -17,7 +17,7 @@ dithered schedule) and heard through each row's stream:
 - latency 0-30 / 30-100 / 100-300 ms: the round trip from loudspeaker write to microphone read,
   a random part of it on the loudspeaker's side;
 - stepping latency: 20 to 150 ms, changing by one or two blocks of 256 to 1024 samples, up or
-  down, one to three times mid-walk (underruns and overruns);
+  down, one to three times mid-walk (underruns and overruns; never below 0 nor above 300 ms);
 - drift: the clocks 30 to 100 ppm apart, either way;
 - other headsets: one or two more wearers 0.8 to 3 m away running the same call, each on its
   own seed and clock;
