@@ -186,7 +186,7 @@ def _steps(rng, duration_s: float, latency_s: float) -> tuple:
     for t in np.sort(rng.uniform(0.3, max(duration_s - 0.6, 0.4), int(rng.integers(1, 4)))):
         step = int(rng.choice([-2, -1, 1, 1, 2])) * int(rng.choice([256, 480, 512, 1024]))
         for s in (step, -step):
-            if 0.0 <= latency_s + (total + s) / 44100 and latency_s + (total + s) / 44100 <= 0.3:
+            if 0.0 <= latency_s + (total + s) / 44100 <= 0.3:
                 out.append((float(t), s))
                 total += s
                 break

@@ -69,7 +69,7 @@ from ..signals import SPEED_OF_SOUND
 from .echoes import EchoFinder, echo_path, mic_geometry
 from .ranging import GUARD, Envelope, ProbeSchedule, clipped, probe_codes, zero_runs
 from .roundtrip import RoundTrip
-from .tracks import Track, associate
+from .tracks import Track, associate, clutter_strength
 from .view import look_all
 
 
@@ -553,7 +553,7 @@ class BoundaryMonitor:
         """Add the echoes of the pulse emitted at ``t`` (seconds) to the tracks."""
         updated = []
         clutter = len(echoes) / (self.max_range_m - self.min_range_m)  # peaks per metre in this pulse
-        mean_strength = sum(a for _, a in echoes) / len(echoes) if len(echoes) >= 4 else 0.0  # (few: not weighed)
+        mean_strength = clutter_strength(echoes)
         for tr, d, strength in associate(self._tracks, t, echoes):
             if tr is None:
                 tr = Track()
@@ -581,10 +581,8 @@ class BoundaryMonitor:
                     tr.ahead = False
                 elif tr.ahead is None and was:  # once in the way, until the fit says it passes by (or not a surface)
                     tr.ahead = True
-        # Dropped: a track not heard for 0.3 s, and one whose echoes have shown over five pulses and
-        # more to be stray peaks (its score at the floor): it would claim the peaks a surface passing
-        # through its gate gives (dense where other headsets ping).
-        self._tracks = [tr for tr in self._tracks if t - tr.times[-1] <= 0.3 and (tr.score > -10.0 or len(tr.times) < 5)]
+        # Dropped: a track not heard for 0.3 s, and one proved stray (dense where other headsets ping).
+        self._tracks = [tr for tr in self._tracks if t - tr.times[-1] <= 0.3 and not tr.stray]
         if len(self._tracks) > 32:  # clutter: keep the likeliest surfaces, then the nearest
             self._tracks = sorted(self._tracks, key=lambda tr: (-tr.score, tr.dists[-1]))[:32]
 

@@ -15,12 +15,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
-SIGMA_M = 0.01
+_SIGMA_M = 0.01
 """How far a surface's echo strays from the track's prediction (head bob, the filter's lag)."""
-_LOG_NORM = -math.log(math.sqrt(2 * math.pi) * SIGMA_M)
+_LOG_NORM = -math.log(math.sqrt(2 * math.pi) * _SIGMA_M)
 _LOG_MISS = math.log(0.2)
 _LOG_QUARTER = math.log(0.25)
 _LOG_YOUNG_GATE = math.log(2 * 0.12)
+_FLOOR, _CEILING = -10.0, 30.0  # the score's bounds: the last half second of echoes tells
 CONFIRMED = math.log(100.0)
 """A track's :attr:`~Track.score` from which its echoes count as a surface's."""
 
@@ -51,6 +52,28 @@ def amplitude_llr(strength: float, clutter_strength: float) -> float:
     """
     x = strength / clutter_strength - 1.0
     return -1.0 if x < -1.0 else 3.0 if x > 3.0 else x
+
+
+def clutter_strength(echoes) -> float:
+    """The mean strength of a pulse's peaks, or 0 where there are too few (under 4) to tell
+    stray peaks' strengths by: what :func:`amplitude_llr` weighs an echo against.
+
+    Parameters
+    ----------
+    echoes : list of (float, float)
+        Each echo's distance in metres and strength.
+
+    Returns
+    -------
+    float
+        A share of the direct sound's peak, or 0.
+
+    Examples
+    --------
+    >>> clutter_strength([(1.0, 0.1), (1.5, 0.2), (2.0, 0.3), (2.5, 0.2)]), clutter_strength([(1.0, 0.1)])
+    (0.2, 0.0)
+    """
+    return sum(a for _, a in echoes) / len(echoes) if len(echoes) >= 4 else 0.0
 
 
 def _solve(n, s1, s2, s3, s4, b0, b1, b2):
@@ -162,6 +185,13 @@ class Track:
         return self.d_hat + (self.speed or 0.0) * (t - self.times[-1])
 
     @property
+    def stray(self) -> bool:
+        """Whether five echoes and more have shown the track's echoes to be stray peaks (its
+        :attr:`score` at the floor): such a track would claim the peaks of a surface passing
+        through its gate."""
+        return self.score <= _FLOOR and len(self.times) >= 5
+
+    @property
     def confirmed(self) -> bool:
         """Whether the echoes are a surface's beyond reasonable doubt (:attr:`score`)."""
         return self.score >= CONFIRMED
@@ -169,7 +199,7 @@ class Track:
     def missed(self) -> None:
         """A pulse came without an echo for it: evidence against (a surface's echo is heard four
         times in five)."""
-        self.score = max(self.score + _LOG_MISS, -10.0)
+        self.score = max(self.score + _LOG_MISS, _FLOOR)
 
     def update(self, t: float, d: float, strength: float, *, clutter_per_m: float = 1.0, clutter_strength: float = 0.0,
                alpha: float = 0.6, beta: float = 0.3) -> None:
@@ -214,10 +244,10 @@ class Track:
                 r = d - predicted
                 # A surface's echo falls within about a centimetre of the prediction; a stray peak
                 # anywhere, at the pulse's density of peaks. (Bounded: the last half second tells.)
-                score = self.score + _LOG_NORM - 0.5 * (r / SIGMA_M) ** 2 - log_clutter
+                score = self.score + _LOG_NORM - 0.5 * (r / _SIGMA_M) ** 2 - log_clutter
                 if clutter_strength > 0.0:
                     score += amplitude_llr(strength, clutter_strength)
-                self.score = -10.0 if score < -10.0 else 30.0 if score > 30.0 else score
+                self.score = _FLOOR if score < _FLOOR else _CEILING if score > _CEILING else score
                 n = len(times) - 1  # residuals so far, this one included: their mean, then a running one
                 self.jitter = r * r if n == 1 else self.jitter + (0.2 if n > 5 else 1.0 / n) * (r * r - self.jitter)
                 self.d_hat = predicted + alpha * r
@@ -457,9 +487,9 @@ def associate(tracks: list, t: float, echoes) -> list[tuple[Track | None, float,
         js, iis = np.nonzero(gap < gates[None, :])
         if len(js):
             taken = set()
-            cost = 0.5 * (gap[js, iis] / SIGMA_M) ** 2  # (the score's terms: see Track.update)
-            if len(echoes) >= 4:
-                mean = sum(a for _, a in echoes) / len(echoes)
+            cost = 0.5 * (gap[js, iis] / _SIGMA_M) ** 2  # (the score's terms: see Track.update)
+            mean = clutter_strength(echoes)
+            if mean > 0.0:
                 cost -= np.array([amplitude_llr(echoes[j][1], mean) for j in js.tolist()])
             for k in np.argsort(cost, kind="stable").tolist():
                 j, i = int(js[k]), int(iis[k])
