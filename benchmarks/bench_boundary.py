@@ -6,7 +6,8 @@ a real audio stream.
 
 Each room (``random_scene``'s rooms: boxes and boxes with a corner cut, walls, floor and ceiling
 of pyroomacoustics' database) gets a glass pane, a mirror and a door-sized opening on three of
-its walls, a fourth wall plain. A wearer (head 1.5 to 1.75 m high, bobbing and swaying) walks
+its walls (the door 2.1 to 2.3 m high), a fourth wall plain. A wearer (head 1.5 to 1.75 m high,
+through a door at least 0.6 m below its lintel; bobbing and swaying) walks
 toward each at 0.5 to 2 m/s from up to 3.5 m away, within 15 degrees of square (closed surfaces
 to 15 cm, the door to its plane), and along a side wall 0.6 to 1.2 m from it (stopping while the
 wall ahead is still beyond two seconds and a metre). The monitor counts anything the wearer
@@ -97,15 +98,15 @@ def bench_room(rng: np.random.Generator, k: int):
         length = room.wall_lengths[w]
         width = float(rng.uniform(1.0, min(2.0, length - 0.4)))
         u_c = float(rng.uniform(width / 2 + 0.1, length - width / 2 - 0.1))
-        if kind == "open":
-            z0, h = 0.0, float(rng.uniform(2.0, min(2.3, room.height_m - 0.1)))
+        if kind == "open":  # (tall enough for the walk to keep its own rule: see walk_toward)
+            z0, h = 0.0, float(rng.uniform(2.1, min(2.3, room.height_m - 0.1)))
         else:
             z0 = float(rng.uniform(0.1, 0.4))
             h = float(rng.uniform(1.9, room.height_m - 0.1)) - z0
         if kind != "wall":
             absorption = (1.0,) * 7 if kind == "open" else closed_absorption(kind, rng)
             scene.discontinuities.append(Discontinuity(w, u_c, z0 + h / 2, width, h, kind, absorption, 0.02))
-        targets[kind] = (w, u_c)
+        targets[kind] = (w, u_c, z0 + h if kind == "open" else None)
     return scene, targets
 
 
@@ -119,11 +120,14 @@ def _ahead_m(scene, p: np.ndarray, heading: np.ndarray) -> float:
     return 8.0
 
 
-def walk_toward(scene, wall: int, u_c: float, rng: np.random.Generator):
-    """(start, goal, plane) of a walk toward the target, or None where there is no room."""
+def walk_toward(scene, wall: int, u_c: float, top_m: float | None, rng: np.random.Generator):
+    """(start, goal, plane) of a walk toward the target, or None where there is no room. Through
+    a door (``top_m``, its lintel's height), the head keeps 0.6 m below the lintel: the walk must
+    keep the rule that what the wearer passes within 0.4 m of (any microphone, up to 0.15 m from
+    the loudspeaker) is in the way."""
     room = scene.room
     origin, u, normal = room.wall_frame(wall)  # normal: outward
-    height = float(rng.uniform(1.5, 1.75))
+    height = float(rng.uniform(1.5, 1.75 if top_m is None else min(1.75, top_m - 0.6)))
     target = origin + u_c * u + [0.0, 0.0, height]
     angle = np.radians(rng.uniform(-15, 15))
     heading = np.cos(angle) * normal + np.sin(angle) * u  # toward the wall

@@ -160,9 +160,9 @@ class BoundaryMonitor:
         A surface the wearer will pass farther from than this, in metres (closest point of
         approach; default 0.4), is not in the way: the wall above a door, a corner to one side.
     threshold : float
-        An echo must rise this many times above the envelope's median (4.5, 13 dB: a mirror
-        2.5 m ahead is heard through pink noise 20 dB below the direct sound; the tracks keep
-        single noise peaks from mattering).
+        An echo must rise this many times above the envelope's median (3.5, 11 dB: a wall 1.5 m
+        ahead is heard through noise 20 dB below the direct sound, or a headset whose microphone
+        sits a centimetre from its loudspeaker; the tracks keep single noise peaks from mattering).
     on_alert : callable, optional
         Called with the new :class:`Alert` whenever the level changes, from the audio thread
         (keep it short: put the alert on a queue).
@@ -196,7 +196,7 @@ class BoundaryMonitor:
     def __init__(self, fs: int = 48000, *, period_s: float = 0.04, dither_s: float = 0.005, seed: int | None = None,
                  max_latency_s: float = 0.35, max_range_m: float = 4.0, min_range_m: float = 0.12,
                  mic_offset_m=0.07, caution_ttc_s: float = 2.0, caution_m: float = 1.0, stop_m: float = 0.5,
-                 hysteresis_m: float = 0.1, approach_m: float = 0.12, miss_m: float = 0.4, threshold: float = 4.5,
+                 hysteresis_m: float = 0.1, approach_m: float = 0.12, miss_m: float = 0.4, threshold: float = 3.5,
                  on_alert=None):
         if fs not in (44100, 48000):
             raise VrechoError(f"fs: expected 44100 or 48000 Hz, got {fs!r}")

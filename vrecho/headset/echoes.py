@@ -50,7 +50,7 @@ class EchoFinder:
         own = np.max([self._response(p, len(lag)) for p in self.probes], axis=0)  # (doubled: 6 dB of slack)
         self._sidelobe = np.maximum(floor, own)
         reach = int(np.flatnonzero(own > 10 ** (-40 / 20))[-1]) + 1  # an echo's own sidelobes above -40 dB
-        self._lobes = np.r_[1.0, own[1:reach]]
+        self._lobe_list = [1.0] + own[1:reach].tolist()
 
     @staticmethod
     def _response(x: np.ndarray, n_lags: int, probe: np.ndarray | None = None) -> np.ndarray:
@@ -129,7 +129,7 @@ class EchoFinder:
         # The direct sound's matched-filter sidelobes fall off with lag; an echo must rise above them too.
         peaks = above + lo - d0
         peaks = peaks[span[peaks] > peak_direct * sidelobe[peaks]]
-        if len(peaks) > 1 and int(np.diff(peaks).min()) < len(self._lobes):
+        if len(peaks) > 1:
             peaks = self._own_lobes_out(span, peaks)  # one echo per surface: its own sidelobes are not echoes
         if not len(peaks):
             return []
@@ -139,14 +139,27 @@ class EchoFinder:
         return list(zip(d[ok].tolist(), (span[peaks][ok] / peak_direct).tolist()))
 
     def _own_lobes_out(self, span: np.ndarray, peaks: np.ndarray) -> np.ndarray:
-        """The peaks less those that are a stronger peak's own sidelobes: within reach of it and
-        no stronger, relative to it, than the codes' autocorrelation there (6 dB of slack)."""
-        level = span[peaks]
-        apart = np.abs(peaks[:, None] - peaks[None, :])
-        lobe = self._lobes[np.minimum(apart, len(self._lobes) - 1)]
-        lobe[apart >= len(self._lobes)] = 0.0
-        below = (level[:, None] < level[None, :]) & (level[:, None] <= level[None, :] * lobe)
-        return peaks[~below.any(axis=1)]
+        """The peaks (in order) less those that are a stronger peak's own sidelobes: within reach
+        of it and no stronger, relative to it, than the codes' autocorrelation there (6 dB of
+        slack). A dozen peaks a pulse, few within reach of each other: plain floats."""
+        lobes, reach = self._lobe_list, len(self._lobe_list)
+        at, level = peaks.tolist(), span[peaks].tolist()
+        n = len(at)
+        keep = []
+        for i in range(n):
+            p, v = at[i], level[i]
+            j = i - 1
+            while j >= 0 and p - at[j] < reach and not (v < level[j] and v <= level[j] * lobes[p - at[j]]):
+                j -= 1
+            if j >= 0 and p - at[j] < reach:
+                continue
+            j = i + 1
+            while j < n and at[j] - p < reach and not (v < level[j] and v <= level[j] * lobes[at[j] - p]):
+                j += 1
+            if j < n and at[j] - p < reach:
+                continue
+            keep.append(i)
+        return peaks[keep] if len(keep) < n else peaks
 
 
 def mic_geometry(mic_offset_m) -> tuple[float, float]:
@@ -226,3 +239,4 @@ def echo_distance(excess, spacing: float, forward: float):
     """
     path = excess + spacing
     return 0.5 * (forward + np.sqrt(np.maximum(forward * forward - spacing * spacing + path * path, 0.0)))
+
