@@ -13,7 +13,8 @@ to 15 cm, the door to its plane), and along a side wall 0.6 to 1.2 m from it (st
 wall ahead is still beyond two seconds and a metre). The monitor counts anything the wearer
 will pass within 0.4 m of as in the way: walks past keep farther. Each walk is simulated once
 per headset (pyroomacoustics, a pulse's own impulse response at each step, on the monitor's own
-dithered schedule) and heard through each row's stream:
+dithered schedule; its draws depend on the room, the headset and the walk only, not on which
+rows are run) and heard through each row's stream:
 
 - latency 0-30 / 30-100 / 100-300 ms: the round trip from loudspeaker write to microphone read,
   a random part of it on the loudspeaker's side;
@@ -336,12 +337,12 @@ def bench_one(args) -> list[dict]:
         if key not in cache:
             sc, world = rooms[room_name]
             start, goal, plane = geometries[kind]
-            wseed = int(np.random.default_rng([seed, k, list(rooms).index(room_name), list(headsets).index(headset_name),
-                                               KINDS.index(kind)]).integers(2 ** 32))
+            walk_key = [seed, k, list(rooms).index(room_name), list(headsets).index(headset_name), KINDS.index(kind)]
+            wseed = int(np.random.default_rng(walk_key).integers(2 ** 32))
             sch = BoundaryMonitor(fs, seed=wseed).schedule
             headset = headsets[headset_name]
             stop = (0.05 if kind == "open" else 0.15) + max(0.0, headset.mic_offset_m[0])  # the microphone in the room
-            walk = walk_responses(sc, start, goal, speeds[kind], sch, plane, np.random.default_rng([seed, k, len(cache)]),
+            walk = walk_responses(sc, start, goal, speeds[kind], sch, plane, np.random.default_rng(walk_key + [1]),
                                   headset=headset, stop_m=stop)
             frames = []
             if kind in CLOSED:
