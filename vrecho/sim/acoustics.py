@@ -124,12 +124,21 @@ def build_room(scene: Scene, fs: int = FS, *, sim: Simulation = DEFAULT_SIMULATI
     fs = check_fs(fs)
     bands = _octave_bands(fs)
     walls = []
-    for i, patch in enumerate(scene.patches()):
-        m = pra.Material({"coeffs": list(patch.material.absorption), "center_freqs": list(BANDS_HZ)},
-                         patch.material.scattering)
+
+    def wall(corners, material, name):
+        m = pra.Material({"coeffs": list(material.absorption), "center_freqs": list(BANDS_HZ)}, material.scattering)
         m.resample(bands)
-        walls.append(pra.wall_factory(patch.corners.T, m.absorption_coeffs, m.scattering_coeffs,
-                                      name=f"{patch.kind}{i}"))
+        walls.append(pra.wall_factory(corners.T, m.absorption_coeffs, m.scattering_coeffs, name=name))
+
+    for i, patch in enumerate(scene.patches()):
+        wall(patch.corners, patch.material, f"{patch.kind}{i}")
+    for i, f in enumerate(scene.furniture):
+        # pyroomacoustics tells a point inside the room by counting a ray's crossings of the walls:
+        # a piece standing on the floor (no underside of its own: the floor covers it) must be
+        # closed for that count, or a ray up through the floor beneath it counts one crossing short
+        # and a point in the room's air reads as outside ("The source must be added inside the room").
+        if f.z0 <= 1e-6:
+            wall(np.c_[f.footprint(), np.zeros(4)], f.material, f"underside{i}")
     room = pra.Room(walls, fs=fs, max_order=sim.max_order, ray_tracing=sim.n_rays > 0,
                     air_absorption=sim.air_absorption)
     if sim.n_rays > 0:
@@ -182,6 +191,7 @@ def _cache_key(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: int, sim:
                "facing": None if facing is None else [np.round(facing, 6).tolist(), scene.emitter_p], "sim": asdict(sim), "pra": pra.__version__, "v": 4}
     if d["furniture"]:  # (only then: the keys of rooms without furniture stay what they were)
         payload["furniture"] = d["furniture"]
+        payload["closed"] = True  # (pieces on the floor closed beneath since: their rooms simulated anew)
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:32]
 
 

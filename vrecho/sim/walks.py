@@ -397,8 +397,8 @@ def other_headsets(walk: WalkResponses, n: int, rng: np.random.Generator) -> np.
                     r.add_microphone(walk.mic_m[i])
                     r.compute_rir()
                     response = np.asarray(r.rir[0][0], float)[lag:lag + n_ir]
-                except ValueError:  # pyroomacoustics' own inside test (a ray across furniture's faces) can
-                    pass  # refuse a point inside the room: the last response stands
+                except ValueError:  # pyroomacoustics may refuse a point (its randomised inside test, no
+                    pass  # image source found): the last response stands
             if response is None:
                 continue
             seg = np.convolve(response, other.probe(k))[:total - e]
