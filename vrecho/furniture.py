@@ -84,6 +84,21 @@ class Furniture:
         local = np.array([[-w, -d], [w, -d], [w, d], [-w, d]])
         return np.asarray(self.center) + local @ np.array([[c, s], [-s, c]])
 
+    @property
+    def on_floor(self) -> bool:
+        """Whether it stands on the floor (the floor then covers its underside)."""
+        return self.z0 <= 1e-6
+
+    def underside(self) -> np.ndarray:
+        """Its underside, wound so that its normal points up into the box.
+
+        Returns
+        -------
+        numpy.ndarray [shape=(4, 3)]
+            The corners in metres.
+        """
+        return np.c_[self.footprint(), np.full(4, self.z0)]
+
     def faces(self) -> list[np.ndarray]:
         """Its faces, each wound so that its normal points into the box (out of the room's air).
 
@@ -102,8 +117,8 @@ class Furniture:
             # its normal points inward.
             out.append(np.array([[b[0], b[1], lo], [a[0], a[1], lo], [a[0], a[1], hi], [b[0], b[1], hi]]))
         out.append(np.c_[fp[::-1], np.full(4, hi)])  # the top, its normal down into the box
-        if lo > 1e-6:
-            out.append(np.c_[fp, np.full(4, lo)])  # the underside, its normal up into the box
+        if not self.on_floor:
+            out.append(self.underside())
         return out
 
     def contains(self, points: np.ndarray, *, margin_m: float = 0.0) -> np.ndarray:

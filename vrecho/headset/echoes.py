@@ -5,6 +5,8 @@ an echo's delay after the direct sound into the distance of the surface ahead
 
 from __future__ import annotations
 
+import bisect
+
 import numpy as np
 from scipy.ndimage import maximum_filter1d
 
@@ -144,22 +146,12 @@ class EchoFinder:
         slack). A dozen peaks a pulse, few within reach of each other: plain floats."""
         lobes, reach = self._lobe_list, len(self._lobe_list)
         at, level = peaks.tolist(), span[peaks].tolist()
-        n = len(at)
         keep = []
-        for i in range(n):
-            p, v = at[i], level[i]
-            j = i - 1
-            while j >= 0 and p - at[j] < reach and not (v < level[j] and v <= level[j] * lobes[p - at[j]]):
-                j -= 1
-            if j >= 0 and p - at[j] < reach:
-                continue
-            j = i + 1
-            while j < n and at[j] - p < reach and not (v < level[j] and v <= level[j] * lobes[at[j] - p]):
-                j += 1
-            if j < n and at[j] - p < reach:
-                continue
-            keep.append(i)
-        return peaks[keep] if len(keep) < n else peaks
+        for i, (p, v) in enumerate(zip(at, level)):
+            near = range(bisect.bisect_right(at, p - reach), bisect.bisect_left(at, p + reach))
+            if not any(v < level[j] and v <= level[j] * lobes[abs(at[j] - p)] for j in near):
+                keep.append(i)
+        return peaks[keep] if len(keep) < len(at) else peaks
 
 
 def mic_geometry(mic_offset_m) -> tuple[float, float]:
@@ -239,4 +231,3 @@ def echo_distance(excess, spacing: float, forward: float):
     """
     path = excess + spacing
     return 0.5 * (forward + np.sqrt(np.maximum(forward * forward - spacing * spacing + path * path, 0.0)))
-

@@ -137,8 +137,8 @@ def build_room(scene: Scene, fs: int = FS, *, sim: Simulation = DEFAULT_SIMULATI
         # a piece standing on the floor (no underside of its own: the floor covers it) must be
         # closed for that count, or a ray up through the floor beneath it counts one crossing short
         # and a point in the room's air reads as outside ("The source must be added inside the room").
-        if f.z0 <= 1e-6:
-            wall(np.c_[f.footprint(), np.zeros(4)], f.material, f"underside{i}")
+        if f.on_floor:
+            wall(f.underside(), f.material, f"underside{i}")
     room = pra.Room(walls, fs=fs, max_order=sim.max_order, ray_tracing=sim.n_rays > 0,
                     air_absorption=sim.air_absorption)
     if sim.n_rays > 0:
