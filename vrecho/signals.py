@@ -396,7 +396,7 @@ def parabolic_peaks(y: np.ndarray, i: np.ndarray) -> np.ndarray:
     array([2.16666667])
     """
     i = np.asarray(i)
-    if i.size <= 4:  # a few peaks: plain floats beat a dozen array calls
+    if i.size <= 32:  # a few dozen peaks: plain floats beat a dozen array calls
         last = len(y) - 1
         out = []
         for k in i.tolist():

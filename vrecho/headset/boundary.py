@@ -484,12 +484,15 @@ class BoundaryMonitor:
                 break
             env.skip(int(due) - lock.guard - 4)  # locked: only the pulses' windows are looked at
             env.compute(end, code=sch.code(k))
+            before = lock.delay
             ref = lock.follow(env, k, self._now)
             if lock.delay is None:  # lost: no alarm, and search again from the next block
                 self._searched = -self.period
                 env.searching = True
                 self._level, self._verdict_track, self._verdict = "clear", None, Alert(flags=("unlocked",))
                 return
+            if abs(lock.delay - before) > lock.guard:  # a step of whole blocks: the next window afresh
+                env.redo(int(lock.due(k + 1)) - lock.guard - 4)
             if ref is not None:
                 echoes = self._echoes.find(self._env, ref, end, code=sch.code(k), clipped=self._clipped_at > ref - 8192)
                 if echoes is not None:

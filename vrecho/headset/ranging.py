@@ -324,18 +324,10 @@ class Envelope:
         """
         upto = min(upto, self.ready())
         self.done = max(self.done, self.n - self.size + GUARD)  # lags whose samples are gone stay unknown
-        m = self.m
         while self.done < upto:
             lo = self.done
             hi = min(upto, lo + 8192)
-            seg = self.samples(lo - GUARD, hi + m + GUARD - 1) if lo >= GUARD else \
-                np.r_[np.zeros(GUARD - lo, np.float32), self.samples(0, hi + m + GUARD - 1)]
-            nfft = fft.next_fast_len(len(seg) + m + GUARD, real=True)
-            kernel = self._kernels.get((nfft, code))
-            if kernel is None:
-                sound = sum(self.probes) if code is None else self.probes[code]
-                kernel = self._kernels[(nfft, code)] = analytic_filter(sound, nfft).astype(np.complex64)
-            env = analytic_envelope(seg, kernel, nfft)[GUARD:GUARD + hi - lo]
+            env = self._correlate(lo, hi, code)
             a = lo % self.size
             first = min(len(env), self.size - a)
             self.env[a:a + first] = env[:first]
@@ -343,6 +335,36 @@ class Envelope:
             self.done = hi
             if self._searching:
                 self._cells(lo, hi)
+
+    def _correlate(self, lo: int, hi: int, code: int | None) -> np.ndarray:
+        """The envelope at lags ``lo`` to ``hi`` from the samples held (not stored)."""
+        m = self.m
+        seg = self.samples(lo - GUARD, hi + m + GUARD - 1) if lo >= GUARD else \
+            np.r_[np.zeros(GUARD - lo, np.float32), self.samples(0, hi + m + GUARD - 1)]
+        nfft = fft.next_fast_len(len(seg) + m + GUARD, real=True)
+        kernel = self._kernels.get((nfft, code))
+        if kernel is None:
+            sound = sum(self.probes) if code is None else self.probes[code]
+            kernel = self._kernels[(nfft, code)] = analytic_filter(sound, nfft).astype(np.complex64)
+        return analytic_envelope(seg, kernel, nfft)[GUARD:GUARD + hi - lo]
+
+    def scan(self, lo: int, hi: int, code: int) -> tuple[int, np.ndarray]:
+        """The envelope for one code at lags ``lo`` to ``hi``, computed afresh from the samples
+        held, whatever was computed there before (the lock's look for its direct sound after a
+        step); clipped to the lags the samples held allow.
+
+        Parameters
+        ----------
+        lo, hi : int
+        code : int
+
+        Returns
+        -------
+        (int, numpy.ndarray)
+            The first lag given, and the envelope from it (empty where none can be).
+        """
+        lo, hi = max(lo, self.n - self.size + GUARD, 0), min(hi, self.ready())
+        return lo, (self._correlate(lo, hi, code) if hi > lo else np.zeros(0, np.float32))
 
     def redo(self, frm: int) -> None:
         """Compute the envelope again from lag ``frm`` on (for another code), as far as the

@@ -5,8 +5,11 @@ The monitor's own direct sound is the strongest arrival that follows the dithere
 one fixed delay; the delay at which the last three pulses all have a strong arrival (the earliest
 such, the direct sound before its echoes) is the round trip. Once locked, each pulse's direct
 sound is looked for near it: small changes (clock drift) are followed, a jump seen in two pulses
-running is a step (an underrun), and two pulses without it unlock the monitor, which then
-searches again.
+running is a step (an underrun). A pulse whose direct sound is not where it is due has its
+arrivals within 60 ms looked at: the same jump in two such pulses is a step of whole blocks,
+taken at once (some 80 ms after it). Two pulses without it and without any such arrival (four
+with), or one after the stream said it lost samples, unlock the monitor, which then searches
+again (three pulses and the round trip itself: slower).
 """
 
 from __future__ import annotations
@@ -15,6 +18,8 @@ import numpy as np
 
 from ..signals import parabolic_peaks
 from .ranging import GUARD, POOL, Envelope, ProbeSchedule
+
+STEP_S = 0.06  # how far a step of the round trip is looked for, either way (two blocks of 1024 at 44.1 kHz and more)
 
 
 class RoundTrip:
@@ -53,6 +58,28 @@ class RoundTrip:
         self._misses = 0
         self._pending: float | None = None
         self._suspect = False
+        self._missed: list[int] = []  # the pulses missed since the last one followed (the last three)
+        self._scans: dict[int, tuple[bool, list[float]]] = {}  # theirs: (scanned wholly, arrivals' offsets)
+
+    def _step(self, env: Envelope) -> tuple[float | None, bool]:
+        """After missed pulses: each one's arrivals within :data:`STEP_S` of where it was due,
+        as offsets from there (strong ones: as strong as the direct sound is followed); an offset
+        common to two of them, the earliest (the direct sound before its echoes), is a step of
+        the round trip. The other pulses' direct sounds fall at offsets that change with the
+        dither, and another headset's pings with its own; the search's three pulses are not
+        waited for. Returns the step (None: none yet) and whether any pulse had candidates."""
+        reach = int(STEP_S * self.schedule.fs)
+        for j in self._missed:
+            if j in self._scans and self._scans[j][0]:
+                continue  # (scanned over its whole reach already)
+            due = self.due(j)
+            lo, seg = env.scan(int(due) - reach, int(due) + reach, self.schedule.code(j))
+            peaks = np.flatnonzero((seg[1:-1] >= 0.3 * self.level) & (seg[1:-1] > seg[:-2]) & (seg[1:-1] >= seg[2:])) + 1
+            offsets = (lo + parabolic_peaks(seg, peaks) - due).tolist() if len(peaks) else []
+            self._scans[j] = (lo + len(seg) >= int(due) + reach, offsets)
+        common = [0.5 * (a + b) for i, j1 in enumerate(self._missed) for j2 in self._missed[i + 1:]
+                  for a in self._scans[j1][1] for b in self._scans[j2][1] if abs(a - b) <= 1.5]
+        return (min(common) if common else None), any(self._scans[j][1] for j in self._missed)
 
     def unlock(self, now: int) -> None:
         """Search again from sample ``now`` on.
@@ -63,7 +90,7 @@ class RoundTrip:
         """
         if self.delay is not None:
             self.searching_since = now
-        self.delay, self._misses, self._pending = None, 0, None
+        self.delay, self._misses, self._pending, self._missed, self._scans = None, 0, None, [], {}
 
     def suspect(self) -> None:
         """The stream said it lost samples (an underrun or overrun): one missing direct sound
@@ -130,7 +157,7 @@ class RoundTrip:
         if max(delays) - min(delays) > 2.0 or max(levels) > 4.0 * min(levels):
             return False
         self.delay, self.level, self.rate = float(np.median(delays)), float(np.median(levels)), 0.0
-        self._misses, self._pending, self._suspect = 0, None, False
+        self._misses, self._pending, self._suspect, self._missed, self._scans = 0, None, False, [], {}
         return True
 
     def due(self, k: int) -> float:
@@ -174,11 +201,18 @@ class RoundTrip:
         peak = float(seg[p])
         if peak < 0.3 * self.level:
             self._misses += 1
-            if self._misses >= 2 or self._suspect:
+            end = int(due) + self.guard + env.m
+            if env.sound_until(a, end) == end:  # (not a dropout's: there, nothing tells of a step)
+                self._missed = self._missed[-2:] + [k]
+            step, candidates = self._step(env)
+            if step is not None:  # the same jump in two of the pulses missed: a step, taken at once
+                self.delay += step
+                self._misses, self._missed, self._scans, self._pending, self._suspect = 0, [], {}, None, False
+            elif self._misses >= 4 or (not candidates and (self._misses >= 2 or self._suspect)):
                 self.unlock(now)
             return None
         at = a + float(parabolic_peaks(seg, (p,))[0])
-        self._misses, self._suspect = 0, False
+        self._misses, self._suspect, self._missed, self._scans = 0, False, [], {}
         self.level += 0.1 * (peak - self.level)
         step = at - due
         if abs(step) <= 1.5:  # the clocks' drift: followed (an alpha-beta filter of delay and its rate)
