@@ -55,11 +55,15 @@ class RoundTrip:
         self.rate = 0.0
         self.level = 0.0
         self.searching_since = 0
-        self._misses = 0
-        self._pending: float | None = None
-        self._suspect = False
+        self._misses = 0  # direct sounds missed running
+        self._pending: float | None = None  # a jump seen once near where the direct sound was due
+        self._suspect = False  # the stream said it lost samples
         self._missed: list[int] = []  # the pulses missed since the last one followed (the last three)
         self._scans: dict[int, tuple[bool, list[float]]] = {}  # theirs: (scanned wholly, arrivals' offsets)
+
+    def _forget_misses(self) -> None:
+        """A fresh start for :meth:`follow`: no pulse missed, no jump pending, no loss reported."""
+        self._misses, self._pending, self._suspect, self._missed, self._scans = 0, None, False, [], {}
 
     def _step(self, env: Envelope) -> tuple[float | None, bool]:
         """After missed pulses: each one's arrivals within :data:`STEP_S` of where it was due,
@@ -90,7 +94,8 @@ class RoundTrip:
         """
         if self.delay is not None:
             self.searching_since = now
-        self.delay, self._misses, self._pending, self._missed, self._scans = None, 0, None, [], {}
+        self.delay = None
+        self._forget_misses()
 
     def suspect(self) -> None:
         """The stream said it lost samples (an underrun or overrun): one missing direct sound
@@ -157,7 +162,7 @@ class RoundTrip:
         if max(delays) - min(delays) > 2.0 or max(levels) > 4.0 * min(levels):
             return False
         self.delay, self.level, self.rate = float(np.median(delays)), float(np.median(levels)), 0.0
-        self._misses, self._pending, self._suspect, self._missed, self._scans = 0, None, False, [], {}
+        self._forget_misses()
         return True
 
     def due(self, k: int) -> float:
@@ -207,7 +212,7 @@ class RoundTrip:
             step, candidates = self._step(env)
             if step is not None:  # the same jump in two of the pulses missed: a step, taken at once
                 self.delay += step
-                self._misses, self._missed, self._scans, self._pending, self._suspect = 0, [], {}, None, False
+                self._forget_misses()
             elif self._misses >= 4 or (not candidates and (self._misses >= 2 or self._suspect)):
                 self.unlock(now)
             return None
