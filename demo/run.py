@@ -32,7 +32,7 @@ from vrecho.app.figures import below
 from vrecho.app.scans import write
 from vrecho.errors import VrechoError
 from vrecho.headset import BoundaryMonitor
-from vrecho.io import atomic_write_text, ensure_writable_dir
+from vrecho.io import OutputFolder, atomic_write_text, ensure_writable_dir
 from vrecho.reconstruct import reconstruct
 from vrecho.scene import Scene, builtin_scene, load_scene
 from vrecho.signals import FS, probe
@@ -337,7 +337,7 @@ def _walkthrough(scene: Scene, result, room: tuple, surfaces: list, placed: list
 
 
 def run(out: str | Path = "vrecho-out", *, scene: str | Path | Scene | None = None, html: str | Path | None = None,
-        browser: bool = True, screenshot: bool = True, seed: int = 0, serve: bool = False,
+        browser: bool = True, screenshot: bool = True, seed: int = 0, serve: bool = False, force: bool = False,
         progress: bool = True) -> DemoRun:
     """Run the demo on ``scene`` (the built-in living room when None; a scene JSON path, or a
     :class:`~vrecho.scene.Scene`), writing everything to ``out`` and the walkthrough page to
@@ -349,7 +349,8 @@ def run(out: str | Path = "vrecho-out", *, scene: str | Path | Scene | None = No
     Parameters
     ----------
     out : str or path
-        Output folder (default ``vrecho-out``); created if missing.
+        Output folder (default ``vrecho-out``); created if missing. New, empty, or an earlier
+        demo's (:class:`vrecho.io.OutputFolder`); its files appear at once, when all are written.
     scene : str, path or Scene, optional
         The scene (default: the built-in living room).
     html : str or path, optional
@@ -362,6 +363,8 @@ def run(out: str | Path = "vrecho-out", *, scene: str | Path | Scene | None = No
         Seed of the simulated recordings.
     serve : bool
         Also serve the walkthrough live until Ctrl-C.
+    force : bool
+        Write into a folder that holds files the demo did not write.
     progress : bool
         Progress bars and the step lines (the table is printed either way).
 
@@ -374,7 +377,8 @@ def run(out: str | Path = "vrecho-out", *, scene: str | Path | Scene | None = No
     ------
     VrechoError
         For a bad scene file, a scene without glass, mirror or opening, an ``html`` path that is
-        not a .html file, or a folder that cannot be written.
+        not a .html file, a folder that cannot be written (a full disk: nothing is written) or
+        holds files the demo did not write (without ``force``).
     """
     from vrecho.classifier import load_classifier  # torch-bound (1.7 s): `vrecho --help` needs none of it
 
@@ -386,88 +390,93 @@ def run(out: str | Path = "vrecho-out", *, scene: str | Path | Scene | None = No
         raise VrechoError(f"scene {scene.name!r} has no glass, mirror or opening: nothing to repair")
     if html is not None and Path(html).suffix.lower() not in (".html", ".htm"):
         raise VrechoError(f"html: expected a .html file, got {html}")
-    out = ensure_writable_dir(out)
-    html = out / "walkthrough.html" if html is None else Path(html)
-    ensure_writable_dir(html.parent)
-    rng = np.random.default_rng(seed)
-    seconds, files = {}, {}
-    say = print if progress else (lambda *a, **k: None)
+    if html is not None:
+        ensure_writable_dir(Path(html).parent)
+    with OutputFolder(out, "demo", force=force) as folder, folder.writing() as stage:
+        rng = np.random.default_rng(seed)
+        seconds, files = {}, {}
+        say = print if progress else (lambda *a, **k: None)
 
-    def step(name):
-        seconds[name] = time.perf_counter()
+        def step(name):
+            seconds[name] = time.perf_counter()
 
-    def done(name, what):
-        seconds[name] = time.perf_counter() - seconds[name]
-        say(f"{name}: {what} ({seconds[name]:.1f} s)", flush=True)
+        def done(name, what):
+            seconds[name] = time.perf_counter() - seconds[name]
+            say(f"{name}: {what} ({seconds[name]:.1f} s)", flush=True)
 
-    t_all = time.perf_counter()
-    say(f"vrecho demo on {scene.name!r}: {len(scene.discontinuities)} glass, mirror or open surfaces, "
-        f"{len(scene.sources)} sound sources; writing to {out}")
-    step("scan")
-    scan = scan_scene(scene, progress=progress)
-    done("scan", f"{len(scan.views)} frames fused into {len(scan.mesh.triangles):,} triangles")
-    step("repair")
-    result = reconstruct(scan, hear=hear_echoes(scene, seed=seed, progress=progress), decide="echocnn")
-    write(result, out, metrics=SceneTruth(scene).score(result.scan.mesh, result.repaired))
-    files.update({k: out / k for k in ("initial.ply", "repaired.ply", "report.json", "before_after.png")})
-    done("repair", f"{len(result.holes)} holes, {len(result.surfaces)} surfaces added")
-    rows = _hole_rows(scene, result) + [_repair_row(json.loads((out / "report.json").read_text())["metrics"])]
+        t_all = time.perf_counter()
+        say(f"vrecho demo on {scene.name!r}: {len(scene.discontinuities)} glass, mirror or open surfaces, "
+            f"{len(scene.sources)} sound sources; writing to {folder.path}")
+        step("scan")
+        scan = scan_scene(scene, progress=progress)
+        done("scan", f"{len(scan.views)} frames fused into {len(scan.mesh.triangles):,} triangles")
+        step("repair")
+        result = reconstruct(scan, hear=hear_echoes(scene, seed=seed, progress=progress), decide="echocnn")
+        write(result, stage, metrics=SceneTruth(scene).score(result.scan.mesh, result.repaired))
+        files.update({k: folder.path / k for k in ("initial.ply", "repaired.ply", "report.json", "before_after.png")})
+        done("repair", f"{len(result.holes)} holes, {len(result.surfaces)} surfaces added")
+        rows = _hole_rows(scene, result) + [_repair_row(json.loads((stage / "report.json").read_text())["metrics"])]
 
-    step("echoes")
-    observations = listen(scene, rng, progress=progress)
-    if observations:
-        predictions = load_classifier().predict_batch(np.stack([o.frame for o in observations]), FS, emitted=probe())
-        files["surfaces.png"] = figure(scene, observations, out / "surfaces.png")
-        atomic_write_text(out / "echoes.md", table(observations, predictions) + "\n")
-        files["echoes.md"] = out / "echoes.md"
-    done("echoes", f"{len(observations)} poses facing a surface heard")
+        step("echoes")
+        observations = listen(scene, rng, progress=progress)
+        if observations:
+            predictions = load_classifier().predict_batch(np.stack([o.frame for o in observations]), FS, emitted=probe())
+            figure(scene, observations, stage / "surfaces.png")
+            files["surfaces.png"] = folder.path / "surfaces.png"
+            atomic_write_text(stage / "echoes.md", table(observations, predictions) + "\n")
+            files["echoes.md"] = folder.path / "echoes.md"
+        done("echoes", f"{len(observations)} poses facing a surface heard")
 
-    placed = []
-    if scene.sources:
-        step("sources")
-        sim = SceneTruth(scene).captures(rng, n_poses=HEAR_POSES)
-        placed = localization.place_sources(sim.captures, bounds=scene.room.box, progress=progress)
-        rows += _source_rows(scene, placed)
-        done("sources", f"{len(placed)} placed from {len(sim.captures)} captures")
+        placed = []
+        if scene.sources:
+            step("sources")
+            sim = SceneTruth(scene).captures(rng, n_poses=HEAR_POSES)
+            placed = localization.place_sources(sim.captures, bounds=scene.room.box, progress=progress)
+            rows += _source_rows(scene, placed)
+            done("sources", f"{len(placed)} placed from {len(sim.captures)} captures")
 
-    step("headset")
-    walks = boundary_walks(scene, rng, progress=progress)
-    rows += _walk_rows(scene, walks)
-    if walks:
-        files["boundary.png"] = boundary_figure(walks, out / "boundary.png")
-    done("headset", f"{len(walks)} walks")
+        step("headset")
+        walks = boundary_walks(scene, rng, progress=progress)
+        rows += _walk_rows(scene, walks)
+        if walks:
+            boundary_figure(walks, stage / "boundary.png")
+            files["boundary.png"] = folder.path / "boundary.png"
+        done("headset", f"{len(walks)} walks")
 
-    step("usd")
-    mesh, surfaces = usd_export.from_reconstruction(result)
-    for name in ("scene.usda", "scene.usdz"):
-        path = usd_export.write_scene(out / name, mesh, surfaces, placed)
-        problems = usd_export.validate(path)
-        errors = [p for p in problems if p.severity == "error"]
-        rows.append((name, f"{len(surfaces)} surfaces, {len(placed)} spatial-audio source{'s' * (len(placed) != 1)}",
-                     "OpenUSD's validators: no error", not errors))
-        files[name] = path
-    done("usd", "scene.usda (+ WAVs) and scene.usdz")
+        step("usd")
+        mesh, surfaces = usd_export.from_reconstruction(result)
+        for name in ("scene.usda", "scene.usdz"):
+            path = usd_export.write_scene(stage / name, mesh, surfaces, placed)
+            problems = usd_export.validate(path)
+            errors = [p for p in problems if p.severity == "error"]
+            rows.append((name, f"{len(surfaces)} surfaces, {len(placed)} spatial-audio source{'s' * (len(placed) != 1)}",
+                         "OpenUSD's validators: no error", not errors))
+            files[name] = folder.path / name
+        done("usd", "scene.usda (+ WAVs) and scene.usdz")
 
-    step("walkthrough")
-    shown = _walkthrough(scene, result, mesh, surfaces, placed, walks)
-    atomic_write_text(html, walkthrough.static_page(shown))
-    files["walkthrough"] = html
-    shot = ""
-    if screenshot and chromium.chromium():
-        files["walkthrough.png"] = chromium.screenshot(html, out / "walkthrough.png")
-        shot = ", walkthrough.png"
-    done("walkthrough", f"{html}{shot}")
+        step("walkthrough")
+        shown = _walkthrough(scene, result, mesh, surfaces, placed, walks)
+        page = stage / "walkthrough.html" if html is None else Path(html)
+        atomic_write_text(page, walkthrough.static_page(shown))
+        files["walkthrough"] = folder.path / "walkthrough.html" if html is None else page
+        shot = ""
+        if screenshot and chromium.chromium():
+            chromium.screenshot(page, stage / "walkthrough.png")
+            files["walkthrough.png"] = folder.path / "walkthrough.png"
+            shot = ", walkthrough.png"
+        done("walkthrough", f"{files['walkthrough']}{shot}")
 
-    run_ = DemoRun(scene, result, placed, walks, rows, files, seconds)
-    seconds["total"] = time.perf_counter() - t_all
-    right = [r[3] for r in rows if r[3] is not None]
-    steps = ", ".join(f"{k} {v:.1f} s" for k, v in seconds.items() if k != "total")
-    tail = f"{sum(right)} of {len(right)} decisions right; {seconds['total']:.0f} s in all ({steps})"
-    atomic_write_text(out / "summary.md", run_.table() + "\n\n" + tail + "\n")
-    files["summary.md"] = out / "summary.md"
+        run_ = DemoRun(scene, result, placed, walks, rows, files, seconds)
+        seconds["total"] = time.perf_counter() - t_all
+        right = [r[3] for r in rows if r[3] is not None]
+        steps = ", ".join(f"{k} {v:.1f} s" for k, v in seconds.items() if k != "total")
+        tail = f"{sum(right)} of {len(right)} decisions right; {seconds['total']:.0f} s in all ({steps})"
+        atomic_write_text(stage / "summary.md", run_.table() + "\n\n" + tail + "\n")
+        files["summary.md"] = folder.path / "summary.md"
+    html = files["walkthrough"]
     print(run_.table())
     print(tail)
-    print(f"written to {out}: " + ", ".join(sorted(p.name for p in files.values())))
+    print(f"written to {folder.path}: " + ", ".join(sorted(p.name for p in files.values())))
     if browser:
         if chromium.open_in_browser(html):
             print(f"the walkthrough is open in your browser: {html}")

@@ -9,7 +9,7 @@
 """
 
 from .convert import from_reconstruction, sources_from_json, sources_from_scene
-from .stage import LabeledSurface, Problem, check_target, validate, write_scene, y_up
+from .stage import LabeledSurface, Problem, check_sources, check_target, is_vrecho_stage, validate, write_scene, y_up
 
-__all__ = ["LabeledSurface", "Problem", "check_target", "from_reconstruction", "sources_from_json", "sources_from_scene",
-           "validate", "write_scene", "y_up"]
+__all__ = ["LabeledSurface", "Problem", "check_sources", "check_target", "from_reconstruction", "is_vrecho_stage",
+           "sources_from_json", "sources_from_scene", "validate", "write_scene", "y_up"]

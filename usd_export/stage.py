@@ -162,6 +162,28 @@ def _check_surface(s: LabeledSurface, i: int) -> None:
         raise VrechoError(f"{where}: confidence must lie in [0, 1], got {s.confidence}")
 
 
+def check_sources(sources) -> list[tuple[np.ndarray, int]]:
+    """Each source's position checked and its signal read, as :func:`write_scene` will: a caller
+    with minutes of work before the write calls it first.
+
+    Parameters
+    ----------
+    sources : list of :class:`localization.PlacedSource`
+
+    Returns
+    -------
+    list of (numpy.ndarray, int)
+        Each source's signal (mono, float) and rate.
+
+    Raises
+    ------
+    VrechoError
+        For a position that is not 3 finite numbers, a WAV that is missing or not audio, or a
+        signal that is not finite, empty or at a rate outside 8000 to 192000 Hz.
+    """
+    return [_source_audio(s, i) for i, s in enumerate(sources)]
+
+
 def _source_audio(s, i: int) -> tuple[np.ndarray, int]:
     """A source's signal (float, at most 1 channel) and rate, read from its WAV if it names one."""
     where = f"sources[{i}] ({getattr(s, 'name', '?')})"
@@ -292,7 +314,7 @@ def _write_stage(stage_path: Path, audio_dir: Path, vertices, faces, colours, su
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
     world = UsdGeom.Xform.Define(stage, "/World")
     stage.SetDefaultPrim(world.GetPrim())
-    stage.SetMetadata("comment", "written by vrecho's usd_export: a repaired scan with spatial audio")
+    stage.SetMetadata("comment", COMMENT)
     UsdGeom.Scope.Define(stage, "/World/Looks")
     looks = _materials(stage, "/World")
 
@@ -345,6 +367,32 @@ def _write_stage(stage_path: Path, audio_dir: Path, vertices, faces, colours, su
         stage.SetStartTimeCode(0.0)
         stage.SetEndTimeCode(float(np.ceil(longest * TIME_CODES_PER_SECOND)))
     stage.GetRootLayer().Save()
+
+
+COMMENT = "written by vrecho's usd_export: a repaired scan with spatial audio"
+"""The stage's ``comment`` metadata: how :func:`is_vrecho_stage` knows a stage this package wrote."""
+
+
+def is_vrecho_stage(path: str | Path) -> bool:
+    """Whether ``path`` is a stage (or package) :func:`write_scene` wrote.
+
+    Looks for :data:`COMMENT` in the file's bytes: a ``.usda`` holds it as text, a ``.usdc``
+    in its string table, a ``.usdz`` in its uncompressed layer.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+
+    Returns
+    -------
+    bool
+        False for a missing or unreadable file, or anyone else's.
+    """
+    try:
+        with open(path, "rb") as f:
+            return COMMENT.encode() in f.read()
+    except OSError:
+        return False
 
 
 def check_target(path: str | Path) -> Path:
@@ -427,7 +475,7 @@ def write_scene(path: str | Path, mesh, surfaces=(), sources=(), *, check: bool 
     surfaces, sources = list(surfaces), list(sources)
     for i, s in enumerate(surfaces):
         _check_surface(s, i)
-    audio = [_source_audio(s, i) for i, s in enumerate(sources)]
+    audio = check_sources(sources)
     parent = path.parent
     try:
         tmp = Path(tempfile.mkdtemp(dir=parent, prefix=f".{path.name}."))

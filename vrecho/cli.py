@@ -1,13 +1,16 @@
 """The ``vrecho`` command: its arguments (argparse), and one call into :mod:`vrecho.app` per
 subcommand.
 
-Bad input ends with one line on stderr (``vrecho: error: ...``) and exit status 2; an interrupt
-with status 130, keeping whatever was finished.
+Bad input ends with one line on stderr (``vrecho: error: ...``) and exit status 2, as does a
+refusal of the operating system (a full disk, a file that cannot be read) or a lack of memory; an
+interrupt with status 130 and one line: ``generate`` and ``train`` keep what was finished and
+resume from it when rerun, the other commands leave their output as it was.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -15,6 +18,33 @@ from . import app
 from .app.scans import LABEL_CHOICES
 from .errors import VrechoError
 from .reconstruct import LABELS, VARIANTS
+
+
+def _whole(lo: int, hi: int):
+    """An argparse type: a whole number from ``lo`` to ``hi``, refused by argparse otherwise."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"expected {lo} to {hi}, got {v}")
+        return v
+    return parse
+
+
+SEED = _whole(0, 2**32 - 1)
+
+
+def _finite(text: str) -> float:
+    """An argparse type: a finite number (``float`` alone takes 'nan' and 'inf')."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return v
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -39,12 +69,15 @@ def build_parser() -> argparse.ArgumentParser:
                                    "impulse responses and labels. Resumable: rerun to finish an interrupted run.")
     g.add_argument("--out", required=True, type=Path, help="dataset folder (created; must be empty or this dataset)")
     g.add_argument("--preset", choices=("tiny", "default"), default="tiny", help="dataset size (default: tiny)")
-    g.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
-    g.add_argument("--workers", type=int, default=None, help="processes (default: one per core)")
+    g.add_argument("--seed", type=SEED, default=0, help="random seed (default: 0)")
+    g.add_argument("--workers", type=_whole(1, 256), default=None, help="processes (default: one per core)")
     g.add_argument("--cache", type=Path, default=None, help="impulse-response cache folder (default: ~/.cache/vrecho/ir)")
+    g.add_argument("--force", action="store_true",
+                   help="generate into a non-empty folder that holds no dataset, beside its files")
     g.add_argument("--quiet", action="store_true", help="no progress bar")
-    g.set_defaults(func=lambda a: app.generate(a.out, preset=a.preset, seed=a.seed, workers=a.workers,
-                                                cache=a.cache, progress=not a.quiet))
+    g.set_defaults(resumable=True, func=lambda a: app.generate(a.out, preset=a.preset, seed=a.seed,
+                                                               workers=a.workers, cache=a.cache, force=a.force,
+                                                               progress=not a.quiet))
 
     t = sub.add_parser("train", help="train EchoCNN and every baseline on a dataset",
                        description="Train every method of the benchmark (EchoCNN variants and baselines) on a dataset "
@@ -53,12 +86,15 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--data", required=True, type=Path, help="dataset folder")
     t.add_argument("--out", required=True, type=Path, help="run folder for checkpoints and models")
     t.add_argument("--method", action="append", default=None, help="train only this method (repeatable; default: all)")
-    t.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
-    t.add_argument("--epochs", type=int, default=40, help="most epochs per model (default: 40)")
-    t.add_argument("--patience", type=int, default=6, help="epochs without improvement before stopping (default: 6)")
+    t.add_argument("--seed", type=SEED, default=0, help="random seed (default: 0)")
+    t.add_argument("--epochs", type=_whole(1, 10000), default=40, help="most epochs per model (default: 40)")
+    t.add_argument("--patience", type=_whole(1, 10000), default=6, help="epochs without improvement before stopping (default: 6)")
+    t.add_argument("--force", action="store_true",
+                   help="train into a non-empty folder that holds no run, beside its files")
     t.add_argument("--quiet", action="store_true", help="no progress bars")
-    t.set_defaults(func=lambda a: app.train(a.data, a.out, methods=a.method, seed=a.seed, epochs=a.epochs,
-                                             patience=a.patience, progress=not a.quiet))
+    t.set_defaults(resumable=True, func=lambda a: app.train(a.data, a.out, methods=a.method, seed=a.seed,
+                                                            epochs=a.epochs, patience=a.patience, force=a.force,
+                                                            progress=not a.quiet))
 
     e = sub.add_parser("evaluate", help="the paper's tables for every trained method",
                        description="Judge every method trained in RUN on the test rooms: the paper's two tables "
@@ -68,10 +104,12 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--run", required=True, type=Path, help="run folder written by `vrecho train`")
     e.add_argument("--out", type=Path, default=None, help="output folder (default: RUN/evaluation)")
     e.add_argument("--method", action="append", default=None, help="evaluate only this method (repeatable)")
-    e.add_argument("--seed", type=int, default=0, help="seed of the product protocol's probes (default: 0)")
+    e.add_argument("--seed", type=SEED, default=0, help="seed of the product protocol's probes (default: 0)")
+    e.add_argument("--force", action="store_true",
+                   help="write into a folder holding files vrecho evaluate did not write")
     e.add_argument("--quiet", action="store_true", help="no progress bars")
     e.set_defaults(func=lambda a: app.evaluate(a.data, a.run, a.out, methods=a.method, seed=a.seed,
-                                                progress=not a.quiet))
+                                                force=a.force, progress=not a.quiet))
 
     r = sub.add_parser("reconstruct", help="scan a scene, find its glass, mirrors and openings, and repair the scan",
                        description="The initial reconstruction (a walkthrough fused by TSDF, with the camera's glass and "
@@ -85,13 +123,15 @@ def build_parser() -> argparse.ArgumentParser:
                         "or the scene's truth")
     r.add_argument("--variant", choices=VARIANTS, default="simplified",
                    help="Algorithm 1's fill: a new convex face, or the scan's own rim vertices moved (default: simplified)")
-    r.add_argument("--frames", type=int, default=60, help="walkthrough frames of a simulated scan (default: 60)")
-    r.add_argument("--seed", type=int, default=0, help="seed of the simulated recordings (default: 0)")
+    r.add_argument("--frames", type=_whole(2, 1000), default=60, help="walkthrough frames of a simulated scan (default: 60)")
+    r.add_argument("--seed", type=SEED, default=0, help="seed of the simulated recordings (default: 0)")
     r.add_argument("--save-scan", action="store_true", help="also write the scan (OUT/scan, the scan-folder format)")
+    r.add_argument("--force", action="store_true",
+                   help="write into a folder holding files vrecho reconstruct did not write")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
     r.set_defaults(func=lambda a: app.reconstruct(a.scene, a.out, labels=a.labels, variant=a.variant,
                                                    n_frames=a.frames, seed=a.seed, save_scan=a.save_scan,
-                                                   progress=not a.quiet))
+                                                   force=a.force, progress=not a.quiet))
 
     x = sub.add_parser("export", help="reconstruct and repair a scene, and write it as OpenUSD (.usda/.usdc/.usdz)",
                        description="The repaired room as an OpenUSD stage: the mesh, each glass, mirror and opening "
@@ -109,11 +149,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "'heard' (a scene's sources recorded by the headset's 4 microphones along the walkthrough, "
                         "located and separated by localization.place_sources) or a JSON file of placed sources "
                         "(see usd_export.sources_from_json)")
-    x.add_argument("--frames", type=int, default=60, help="walkthrough frames of a simulated scan (default: 60)")
-    x.add_argument("--seed", type=int, default=0, help="seed of the simulated recordings (default: 0)")
+    x.add_argument("--frames", type=_whole(2, 1000), default=60, help="walkthrough frames of a simulated scan (default: 60)")
+    x.add_argument("--seed", type=SEED, default=0, help="seed of the simulated recordings (default: 0)")
+    x.add_argument("--force", action="store_true",
+                   help="replace a file (and its _audio folder) at --out that vrecho did not write")
     x.add_argument("--quiet", action="store_true", help="no progress bars")
     x.set_defaults(func=lambda a: app.export(a.scene, a.out, labels=a.labels, variant=a.variant, sources=a.sources,
-                                              n_frames=a.frames, seed=a.seed, progress=not a.quiet))
+                                              n_frames=a.frames, seed=a.seed, force=a.force, progress=not a.quiet))
 
     c = sub.add_parser("capture", help="a phone's capture (video, or sound file): pulses, frames, EchoCNN's answers, "
                                        "and the repair of its mesh",
@@ -128,7 +170,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--audio", type=Path, default=None, help="a sound file (WAV, FLAC) instead of a video")
     c.add_argument("--images", type=Path, default=None,
                    help="with --audio: a folder of the capture's pictures, numbered in order (ffmpeg's %%06d.png)")
-    c.add_argument("--image-fps", type=float, default=None,
+    c.add_argument("--image-fps", type=_finite, default=None,
                    help="the rate the pictures were extracted at, numbered from 1 (ffmpeg -vf fps=N); "
                         "needed by --images and --poses")
     c.add_argument("--poses", type=Path, default=None,
@@ -136,14 +178,16 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--mesh", type=Path, default=None, help="with --poses: the scan's mesh (.ply or .obj) to repair")
     c.add_argument("--labels", choices=tuple(LABELS), default="echocnn",
                    help="who decides what each hole is (as for reconstruct; default: echocnn)")
-    c.add_argument("--emitter-distance", type=float, default=None, metavar="M",
+    c.add_argument("--emitter-distance", type=_finite, default=None, metavar="M",
                    help="metres from the playing loudspeaker to the filming microphone (default 0.07, "
                         "PROTOCOL.md's device: the second phone held against the first)")
     c.add_argument("--out", type=Path, required=True, help="output folder")
+    c.add_argument("--force", action="store_true",
+                   help="write into a folder holding files vrecho capture did not write")
     c.add_argument("--quiet", action="store_true", help="accepted for scripts: capture shows no progress bars")
     c.set_defaults(func=lambda a: app.capture(a.out, a.video, a.audio, a.images, a.poses, a.mesh,
                                                image_fps=a.image_fps, labels=a.labels,
-                                               emitter_distance_m=a.emitter_distance))
+                                               emitter_distance_m=a.emitter_distance, force=a.force))
 
     d = sub.add_parser("demo", help="the whole run on the built-in living room, as a meshcat walkthrough",
                        description="Simulate the built-in scene (or --scene FILE) and run all of vrecho on it: the "
@@ -157,10 +201,12 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--serve", action="store_true",
                    help="also keep the walkthrough on a live meshcat server (its address printed) until Ctrl-C")
     d.add_argument("--scene", type=Path, default=None, help="a scene JSON file instead of the built-in one")
-    d.add_argument("--seed", type=int, default=0, help="seed of the simulated recordings (default: 0)")
+    d.add_argument("--seed", type=SEED, default=0, help="seed of the simulated recordings (default: 0)")
+    d.add_argument("--force", action="store_true",
+                   help="write into a folder holding files vrecho demo did not write")
     d.add_argument("--quiet", action="store_true", help="no progress bars or step lines (the table is printed)")
     d.set_defaults(func=lambda a: app.demo(a.out, scene=a.scene, html=a.html, browser=not a.no_browser,
-                                            seed=a.seed, serve=a.serve, progress=not a.quiet))
+                                            seed=a.seed, serve=a.serve, force=a.force, progress=not a.quiet))
 
     w = sub.add_parser("watch", help="the headset call live on this computer's sound card",
                        description="Play the headset call's probe on the loudspeaker and listen on the microphone "
@@ -171,9 +217,9 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--samplerate", type=int, default=48000, help="44100 or 48000 Hz (default: 48000)")
     w.add_argument("--blocksize", type=int, default=0,
                    help="frames per callback, up to 4096 (default: 0, the audio system's choice)")
-    w.add_argument("--mic-offset", type=float, default=0.07, metavar="M",
+    w.add_argument("--mic-offset", type=_finite, default=0.07, metavar="M",
                    help="loudspeaker to microphone in metres, as the maker gives it (default 0.07; a laptop: 0.1 to 0.3)")
-    w.add_argument("--seconds", type=float, default=None, help="stop after this long (default: until Ctrl-C)")
+    w.add_argument("--seconds", type=_finite, default=None, help="stop after this long (default: until Ctrl-C)")
     w.add_argument("--list-devices", action="store_true", help="list the sound devices and exit")
     w.set_defaults(func=lambda a: print(app.list_devices()) if a.list_devices else app.watch(
         device=int(a.device) if a.device is not None and a.device.isdigit() else a.device, samplerate=a.samplerate,
@@ -193,7 +239,8 @@ def main(argv: list[str] | None = None) -> int:
     Returns
     -------
     int
-        The exit status: 0, 2 after bad input (one line on stderr) or 130 after an interrupt.
+        The exit status: 0, 2 after bad input, an operating system's refusal or a lack of memory
+        (one line on stderr), or 130 after an interrupt.
 
     Examples
     --------
@@ -208,10 +255,18 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     except VrechoError as e:
         print(f"vrecho: error: {e}", file=sys.stderr)
-        return 2
+    except OSError as e:  # what no check can foresee: a file that vanished, a disk that filled meanwhile
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"vrecho: error: {where}{e.strerror or e}", file=sys.stderr)
+    except MemoryError:
+        print("vrecho: error: out of memory (a smaller scene, fewer frames or a machine with more memory)",
+              file=sys.stderr)
     except KeyboardInterrupt:
-        print("vrecho: interrupted; finished work is kept: rerun the same command to resume", file=sys.stderr)
+        print("vrecho: interrupted; " + ("finished work is kept: rerun the same command to resume"
+                                         if getattr(args, "resumable", False) else "nothing was written"),
+              file=sys.stderr)
         return 130
+    return 2
 
 
 if __name__ == "__main__":

@@ -4,12 +4,13 @@ scan) out."""
 from __future__ import annotations
 
 import csv
+import io
 from pathlib import Path
 
 import numpy as np
 
 from ..capture import analyse, open_capture
-from ..io import ensure_writable_dir
+from ..io import OutputFolder, atomic_write_text
 from .figures import capture_figure
 from .scans import summary, write
 
@@ -20,7 +21,7 @@ FIELDS = ("frame", "time_s", "x_m", "y_m", "z_m", "hole", "model", "open", "mate
 
 def capture(out: str | Path, video=None, audio=None, images=None, poses=None, mesh=None, *,
             image_fps: float | None = None, labels: str = "echocnn", emitter_distance_m: float | None = None,
-            classifier=None) -> dict:
+            classifier=None, force: bool = False) -> dict:
     """``vrecho capture``: a phone's capture in, EchoCNN's answers (and a repaired scan) out.
 
     The pulses of the recording (a video's sound, or ``audio``) are found and cut into frames,
@@ -44,7 +45,8 @@ def capture(out: str | Path, video=None, audio=None, images=None, poses=None, me
     Parameters
     ----------
     out : str or path
-        Output folder; created if missing.
+        Output folder; created if missing. New, empty, or an earlier capture's
+        (:class:`vrecho.io.OutputFolder`); all files appear at once, when all are written.
     video : path, optional
         A video with its sound (MP4, MOV, MKV); give it or ``audio``, not both.
     audio : path, optional
@@ -64,6 +66,8 @@ def capture(out: str | Path, video=None, audio=None, images=None, poses=None, me
         Metres from the loudspeaker to the microphone, 0 to 3 (default 0.07).
     classifier : Classifier, optional
         The EchoCNN to ask (default: the shipped weights, :func:`vrecho.load_classifier`).
+    force : bool
+        Write into a folder that holds files this command did not write.
 
     Returns
     -------
@@ -76,25 +80,29 @@ def capture(out: str | Path, video=None, audio=None, images=None, poses=None, me
     VrechoError
         For inputs that do not go together (a video and a sound file, ``poses`` without
         ``mesh``, pictures without ``image_fps``, ...), unknown ``labels``, an emitter distance
-        outside 0 to 3 m, a file that cannot be read, or an ``out`` that cannot be written.
+        outside 0 to 3 m, a file that cannot be read, or an ``out`` that cannot be written (a full
+        disk: nothing is written) or holds files this command did not write (without ``force``).
     """
     rec = open_capture(video, audio, images, poses, mesh, image_fps=image_fps, labels=labels,
                        emitter_distance_m=emitter_distance_m)
-    out = ensure_writable_dir(out)
-    found = analyse(rec, classifier=classifier)
-    rows, result = found.rows, found.result
-    if result is not None:
-        write(result, out, save_scan=True)
-    posed = rec.poses is not None
-    with open(out / "frames.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, FIELDS if posed else [c for c in FIELDS if c not in ("x_m", "y_m", "z_m", "hole")],
+    with OutputFolder(out, "capture", force=force) as folder:
+        found = analyse(rec, classifier=classifier)
+        rows, result = found.rows, found.result
+        posed = rec.poses is not None
+        table = io.StringIO(newline="")
+        w = csv.DictWriter(table, FIELDS if posed else [c for c in FIELDS if c not in ("x_m", "y_m", "z_m", "hole")],
                            restval="")
         w.writeheader()
         w.writerows(rows)
-    if found.frame_pictures is not None:
-        np.savez_compressed(out / "images.npz", time_s=found.times, gray=found.frame_pictures)
-    capture_figure(rec.audio, rec.fs, found.onsets, rows, out / "capture.png",
-                   None if result is None else result.decisions)
+        with folder.writing() as stage:
+            if result is not None:
+                write(result, stage, save_scan=True)
+            atomic_write_text(stage / "frames.csv", table.getvalue())
+            if found.frame_pictures is not None:
+                np.savez_compressed(stage / "images.npz", time_s=found.times, gray=found.frame_pictures)
+            capture_figure(rec.audio, rec.fs, found.onsets, rows, stage / "capture.png",
+                           None if result is None else result.decisions)
+    out = folder.path
     n_open = sum(r["open"] for r in rows)
     print(f"{len(rows)} frames: {n_open} open, {len(rows) - n_open} closed "
           f"({sum(r['material'] == 'mirror' for r in rows)} mirror)")

@@ -8,7 +8,7 @@ import demo as walkthrough_demo
 
 
 def demo(out: str | Path = "vrecho-out", *, scene=None, html=None, browser: bool = True, seed: int = 0,
-         serve: bool = False, progress: bool = True):
+         serve: bool = False, force: bool = False, progress: bool = True):
     """``vrecho demo``: :func:`demo.run` on the built-in living room (or ``scene``, a scene JSON file).
 
     Parameters
@@ -25,6 +25,8 @@ def demo(out: str | Path = "vrecho-out", *, scene=None, html=None, browser: bool
         Seed of the simulated recordings.
     serve : bool
         Also show the walkthrough on a live meshcat server until Ctrl-C.
+    force : bool
+        Write into a folder holding files the demo did not write.
     progress : bool
         Progress bars and step lines.
 
@@ -39,4 +41,5 @@ def demo(out: str | Path = "vrecho-out", *, scene=None, html=None, browser: bool
         For a bad scene file, a scene with nothing to repair, an ``html`` path that is not a
         .html file, or an output folder that cannot be written.
     """
-    return walkthrough_demo.run(out, scene=scene, html=html, browser=browser, seed=seed, serve=serve, progress=progress)
+    return walkthrough_demo.run(out, scene=scene, html=html, browser=browser, seed=seed, serve=serve, force=force,
+                                progress=progress)

@@ -10,7 +10,7 @@ from ..learn.datasets import open_dataset
 
 
 def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: int | None = None, cache=None,
-             progress: bool = True) -> Path:
+             force: bool = False, progress: bool = True) -> Path:
     """``vrecho generate``: :func:`vrecho.learn.datasets.generate` (resumable), then what was made.
 
     Parameters
@@ -25,6 +25,8 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
         Processes (default: one per core).
     cache : path, optional
         Impulse-response cache folder (default ``~/.cache/vrecho/ir``).
+    force : bool
+        Generate into a folder holding other files (not a dataset), beside them.
     progress : bool
         Show a progress bar.
 
@@ -39,7 +41,7 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
         For an unknown preset, a negative seed, fewer than 1 worker, or an ``out`` that cannot be
         written or holds something else.
     """
-    out = generate_dataset(out, preset=preset, seed=seed, workers=workers, cache=cache, progress=progress)
+    out = generate_dataset(out, preset=preset, seed=seed, workers=workers, cache=cache, progress=progress, force=force)
     ds = open_dataset(out)
     m = ds.manifest
     print(f"{out}: {len(ds)} frames ({int(ds.mask(kind='echo').sum())} echo, {int(ds.mask(kind='source').sum())} "
@@ -50,7 +52,7 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
 
 
 def train(data: str | Path, out: str | Path, *, methods=None, seed: int = 0, epochs: int = 40, patience: int = 6,
-          progress: bool = True) -> dict[str, dict]:
+          force: bool = False, progress: bool = True) -> dict[str, dict]:
     """``vrecho train``: :func:`vrecho.learn.evaluate.train_methods` (resumable), then each
     method's record; ``out/classifier.pt`` once the shipped methods are trained.
 
@@ -68,6 +70,8 @@ def train(data: str | Path, out: str | Path, *, methods=None, seed: int = 0, epo
         Most epochs per model (default 40).
     patience : int
         Epochs without improvement before stopping (default 6).
+    force : bool
+        Train into a folder holding other files (not a run), beside them.
     progress : bool
         Show progress bars.
 
@@ -83,7 +87,8 @@ def train(data: str | Path, out: str | Path, *, methods=None, seed: int = 0, epo
     """
     from ..learn.evaluate import train_methods  # torch-bound (1.7 s): only when training
 
-    records = train_methods(data, out, methods=methods, seed=seed, epochs=epochs, patience=patience, progress=progress)
+    records = train_methods(data, out, methods=methods, seed=seed, epochs=epochs, patience=patience, progress=progress,
+                            force=force)
     for name, r in records.items():
         extra = f", {r['epochs']} epochs (best {r['best_epoch'] + 1})" if "epochs" in r else ""
         print(f"{name:18s} {r['protocol']:7s} {r['n_train']:6d} train frames, {r['seconds']:7.1f} s{extra}")
@@ -93,7 +98,7 @@ def train(data: str | Path, out: str | Path, *, methods=None, seed: int = 0, epo
 
 
 def evaluate(data: str | Path, run: str | Path, out: str | Path | None = None, *, methods=None, seed: int = 0,
-             progress: bool = True) -> dict[str, dict]:
+             force: bool = False, progress: bool = True) -> dict[str, dict]:
     """``vrecho evaluate``: :func:`vrecho.learn.evaluate.evaluate` into ``out`` (``run/evaluation``
     by default), then its tables.
 
@@ -109,6 +114,8 @@ def evaluate(data: str | Path, run: str | Path, out: str | Path | None = None, *
         Evaluate only these methods (default: every trained one).
     seed : int
         Seed of the product protocol's probes (default 0).
+    force : bool
+        Write into an ``out`` holding files evaluation did not write.
     progress : bool
         Show progress bars.
 
@@ -125,7 +132,7 @@ def evaluate(data: str | Path, run: str | Path, out: str | Path | None = None, *
     from ..learn.evaluate import evaluate as evaluate_methods  # torch-bound (1.7 s): only when judging
 
     out = Path(run) / "evaluation" if out is None else Path(out)
-    results = evaluate_methods(data, run, out, seed=seed, progress=progress, methods=methods)
+    results = evaluate_methods(data, run, out, seed=seed, progress=progress, methods=methods, force=force)
     print((out / "tables.md").read_text())
     print(f"written to {out}: tables.md, results.csv, metrics.json, confusion_*.png, "
           "activation_maximisation_depth.png")

@@ -12,7 +12,7 @@ import localization
 import usd_export
 
 from ..errors import VrechoError
-from ..io import atomic_write_text, ensure_writable_dir
+from ..io import OutputFolder, atomic_write_text, write_mesh
 from ..reconstruct import LABELS, VARIANTS, Reconstruction
 from ..reconstruct import reconstruct as repair_scan
 from .figures import before_after
@@ -31,17 +31,20 @@ def _repaired(source: Source, labels: str, variant: str) -> Reconstruction:
     return repair_scan(source.scan, hear=source.hear, decide=decide, variant=variant)
 
 
-def _check(labels: str, variant: str, n_frames: int) -> None:
+def _check(labels: str, variant: str, n_frames: int, seed: int) -> None:
     if labels not in LABEL_CHOICES:
         raise VrechoError(f"labels: expected one of {LABEL_CHOICES}, got {labels!r}")
     if variant not in VARIANTS:
         raise VrechoError(f"variant: expected one of {VARIANTS}, got {variant!r}")
-    if n_frames < 2:
-        raise VrechoError(f"frames: expected at least 2, got {n_frames}")
+    if isinstance(n_frames, bool) or not isinstance(n_frames, (int, np.integer)) or not 2 <= n_frames <= 1000:
+        raise VrechoError(f"frames: expected a whole number from 2 to 1000, got {n_frames!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
+        raise VrechoError(f"seed: expected a whole number from 0 to {2**32 - 1}, got {seed!r}")
 
 
 def reconstruct(source: str | Path, out: str | Path, *, labels: str = "echocnn", variant: str = "simplified",
-                n_frames: int = 60, seed: int = 0, save_scan: bool = False, progress: bool = True) -> Reconstruction:
+                n_frames: int = 60, seed: int = 0, save_scan: bool = False, force: bool = False,
+                progress: bool = True) -> Reconstruction:
     """``vrecho reconstruct``: scan (or load) a source, repair it, write the results, print a summary.
 
     Parameters
@@ -54,7 +57,8 @@ def reconstruct(source: str | Path, out: str | Path, *, labels: str = "echocnn",
         Output folder: ``initial.ply``, ``repaired.ply``, ``report.json`` (surfaces, holes,
         decisions with their confidences and per-frame inferences, times; for a scene also the
         metrics against its truth), ``before_after.png`` and, with ``save_scan``, ``scan/`` (the
-        scan-folder format).
+        scan-folder format). New, empty, or an earlier run's of this command
+        (:class:`vrecho.io.OutputFolder`); all files appear at once, when all are written.
     labels : {"echocnn", "echocnn-only", "oracle"}
         Who decides what each hole is (:data:`LABEL_CHOICES`).
     variant : {"simplified", "per_vertex"}
@@ -63,6 +67,8 @@ def reconstruct(source: str | Path, out: str | Path, *, labels: str = "echocnn",
         Walkthrough frames of a scene's simulated scan.
     seed : int
         Seed of a scene's simulated recordings.
+    force : bool
+        Write into a folder that holds files this command did not write.
     progress : bool
         Progress bars.
 
@@ -74,9 +80,10 @@ def reconstruct(source: str | Path, out: str | Path, *, labels: str = "echocnn",
     Raises
     ------
     VrechoError
-        For unknown ``labels`` or ``variant``, fewer than 2 frames, a source that is none of the
-        above or cannot be read, ``labels="oracle"`` on a scan folder, or an ``out`` that cannot
-        be written.
+        For unknown ``labels`` or ``variant``, frames outside 2 to 1000, a source that is none of the
+        above or cannot be read, ``labels="oracle"`` on a scan folder, an ``out`` that cannot
+        be written (a full disk: nothing is written) or holds files this command did not write
+        (without ``force``).
 
     Examples
     --------
@@ -88,15 +95,17 @@ def reconstruct(source: str | Path, out: str | Path, *, labels: str = "echocnn",
     ...     print(e)
     scene: no-such-scene.json is neither 'builtin', a scene JSON file nor a scan folder
     """
-    _check(labels, variant, n_frames)
+    _check(labels, variant, n_frames, seed)
     spec = resolve(source)  # bad input answered before anything is written
     if labels == "oracle" and isinstance(spec, Path):
         raise VrechoError("labels='oracle' needs the scene's truth")
-    out = ensure_writable_dir(out)
-    src = open_source(spec, n_frames=n_frames, seed=seed, progress=progress)
-    result = _repaired(src, labels, variant)
-    write(result, out, metrics=None if src.truth is None else src.truth.score(result.scan.mesh, result.repaired),
-          save_scan=save_scan)
+    with OutputFolder(out, "reconstruct", force=force) as folder:
+        src = open_source(spec, n_frames=n_frames, seed=seed, progress=progress)
+        result = _repaired(src, labels, variant)
+        metrics = None if src.truth is None else src.truth.score(result.scan.mesh, result.repaired)
+        with folder.writing() as stage:
+            write(result, stage, metrics=metrics, save_scan=save_scan)
+    out = folder.path
     print(summary(result))
     print(f"{len(result.surfaces)} surfaces added; discontinuities and repair "
           f"{result.seconds['total_without_hearing']:.1f} s")
@@ -114,17 +123,15 @@ def write(result: Reconstruction, out: Path, *, metrics: dict | None = None, sav
     result : Reconstruction
         The repair.
     out : pathlib.Path
-        An existing, writable folder.
+        An existing, writable folder (an :class:`~vrecho.io.OutputFolder`'s staging folder).
     metrics : dict, optional
         The repair's metrics against a scene's truth.
     save_scan : bool
         Also write the scan (the scan-folder format).
     """
-    import open3d as o3d  # heavy (1.2 s to import): only where meshes are written
-
     scan = result.scan
-    o3d.io.write_triangle_mesh(str(out / "initial.ply"), scan.mesh)
-    o3d.io.write_triangle_mesh(str(out / "repaired.ply"), result.repaired)
+    write_mesh(out / "initial.ply", scan.mesh)
+    write_mesh(out / "repaired.ply", result.repaired)
     report = result.report()
     if metrics is not None:
         report["metrics"] = metrics
@@ -158,7 +165,7 @@ def summary(result: Reconstruction) -> str:
 
 
 def export(source: str | Path, out: str | Path, *, labels: str = "echocnn", variant: str = "simplified",
-           sources: str = "none", n_frames: int = 60, seed: int = 0, progress: bool = True) -> Path:
+           sources: str = "none", n_frames: int = 60, seed: int = 0, force: bool = False, progress: bool = True) -> Path:
     """``vrecho export``: reconstruct and repair a source as :func:`reconstruct` does, and write it
     as an OpenUSD stage (:func:`usd_export.write_scene`; refused while OpenUSD's validators report
     an error, and nothing is written then).
@@ -168,7 +175,11 @@ def export(source: str | Path, out: str | Path, *, labels: str = "echocnn", vari
     source : str or path
         As for :func:`reconstruct`.
     out : path
-        The stage: a ``.usda``, ``.usdc``, ``.usd`` or ``.usdz`` path.
+        The stage: a ``.usda``, ``.usdc``, ``.usd`` or ``.usdz`` path. A file there, or a layer's
+        ``<stem>_audio/`` folder, is replaced only where an earlier export wrote it (or with
+        ``force``): the output-folder policy of :class:`vrecho.io.OutputFolder`, for one file.
+    force : bool
+        Replace a file (and audio folder) at ``out`` that vrecho did not write.
     labels, variant, n_frames, seed, progress
         As for :func:`reconstruct`.
     sources : str
@@ -186,13 +197,23 @@ def export(source: str | Path, out: str | Path, *, labels: str = "echocnn", vari
     ------
     VrechoError
         For an ``out`` of another suffix or in a folder that does not exist, ``sources`` that is
-        none of the above, a bad ``labels``, ``variant`` or frame count, a bad source,
-        ``truth``, ``heard`` or ``oracle`` on a scan folder, or a stage with validation errors.
+        none of the above or a sources file that cannot be read, a bad ``labels``, ``variant`` or
+        frame count, a bad source, ``truth``, ``heard`` or ``oracle`` on a scan folder, a file at
+        ``out`` that vrecho did not write (without ``force``), or a stage with validation errors.
     """
-    usd_export.check_target(out)  # before the work, not after
-    if sources not in SOURCE_CHOICES and not Path(sources).is_file():
-        raise VrechoError(f"sources: expected 'none', 'truth', 'heard' or a JSON file, got {sources!r}")
-    _check(labels, variant, n_frames)
+    out = usd_export.check_target(out)  # every check before the work, not after
+    audio_dir = out.with_name(f"{out.stem}_audio")
+    theirs = [p for p in (out, audio_dir) if p.exists() and not usd_export.is_vrecho_stage(out)]
+    if theirs and not force:
+        raise VrechoError(f"out: {', '.join(map(str, theirs))} not written by vrecho export; choose another path, "
+                          "or pass --force to replace it")
+    from_file = None
+    if sources not in SOURCE_CHOICES:
+        if not Path(sources).is_file():
+            raise VrechoError(f"sources: expected 'none', 'truth', 'heard' or a JSON file, got {sources!r}")
+        from_file = usd_export.sources_from_json(sources)
+        usd_export.check_sources(from_file)  # their WAVs read now, not after minutes of work
+    _check(labels, variant, n_frames, seed)
     spec = resolve(source)
     if sources in ("truth", "heard") and isinstance(spec, Path):
         raise VrechoError(f"sources: {sources!r} needs a scene (builtin or a scene JSON), not a scan folder")
@@ -208,7 +229,7 @@ def export(source: str | Path, out: str | Path, *, labels: str = "echocnn", vari
     elif sources == "heard":
         placed = _heard(src, seed, progress)
     else:
-        placed = usd_export.sources_from_json(sources)
+        placed = from_file
     path = usd_export.write_scene(out, room, surfaces, placed)  # refuses a stage with validation errors
     problems = usd_export.validate(path)  # the warnings for the user (write_scene refused any error)
     for p in problems:

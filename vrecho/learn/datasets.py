@@ -29,6 +29,7 @@ import io
 import json
 import multiprocessing
 import os
+import signal
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
@@ -173,10 +174,13 @@ def _worker_init() -> None:
     # numba under librosa) stay single-threaded; NumPy is already loaded, and its FFTs are anyway.
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
         os.environ[var] = "1"
+    # Ctrl-C reaches every process of the terminal's group: the driver alone answers it (one line,
+    # the running rooms finished and kept), not each worker with a traceback.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: int | None = None,
-             cache: str | Path | None = None, progress: bool = True) -> Path:
+             cache: str | Path | None = None, progress: bool = True, force: bool = False) -> Path:
     """Generate (or finish) a dataset in ``out``.
 
     Resumable: a rerun does only the rooms not yet finished; a complete dataset is returned as
@@ -197,6 +201,8 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
         Impulse-response cache folder (default: :func:`vrecho.sim.acoustics.default_cache_dir`).
     progress : bool
         Show a progress bar.
+    force : bool
+        Generate into an ``out`` that holds other files (not another dataset) beside them.
 
     Returns
     -------
@@ -206,8 +212,9 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
     Raises
     ------
     VrechoError
-        For an unknown preset, a negative or non-integer seed, fewer than 1 worker, an ``out``
-        that cannot be written, or one that holds another dataset or other files.
+        For an unknown preset, a negative or non-integer seed, fewer than 1 or more than 256
+        workers, an ``out`` that cannot be written, or one that holds another dataset or (without
+        ``force``) other files.
     """
     import zarr  # heavy (0.5 s to import): only the dataset's arrays need it
 
@@ -216,8 +223,8 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise VrechoError(f"seed: expected a non-negative integer, got {seed!r}")
     workers = (os.cpu_count() or 1) if workers is None else workers
-    if workers < 1:
-        raise VrechoError(f"workers: expected at least 1, got {workers}")
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or not 1 <= workers <= 256:
+        raise VrechoError(f"workers: expected a whole number from 1 to 256, got {workers!r}")
     out = ensure_writable_dir(out)
     p = PRESETS[preset]
     manifest_path = out / "manifest.json"
@@ -229,8 +236,9 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
                               "choose an empty folder")
         if old.get("complete"):
             return out
-    elif any(out.iterdir()):
-        raise VrechoError(f"out: {out} is not empty and holds no vrecho dataset; choose an empty folder")
+    elif any(out.iterdir()) and not force:
+        raise VrechoError(f"out: {out} is not empty and holds no vrecho dataset; choose an empty folder, "
+                          "or pass --force to generate beside its files")
     splits = _splits(p, seed)
     n_frames = p.n_scenes * _block(p)
     n_irs = p.n_scenes * (p.n_poses + p.n_sources)

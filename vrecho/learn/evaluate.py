@@ -29,7 +29,7 @@ from scipy.signal import resample_poly
 
 from ..errors import VrechoError
 from ..features import echo_features
-from ..io import atomic_write_text, ensure_writable_dir
+from ..io import OutputFolder, atomic_write_text, ensure_writable_dir
 from ..models import HEADS, EchoCNN, FeatureBaseline, build
 from .datasets import open_dataset
 from .report import activation_maximisation, confusion_figures, write_tables
@@ -272,7 +272,7 @@ class Harness:
 
 
 def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, patience: int = 6,
-                  progress: bool = True) -> dict[str, dict]:
+                  progress: bool = True, force: bool = False) -> dict[str, dict]:
     """Train every method (or those named) on a dataset, resumably, into the run folder ``out``.
 
     A method already trained is skipped. When the methods of :data:`SHIPPED` are all trained,
@@ -288,8 +288,10 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
         Seeds the weights, the shuffling and the product protocol's frames.
     epochs, patience : int
         Most epochs per CNN (default 40; a method's ``max_epochs`` caps it), and epochs without
-        improvement before stopping (default 6).
+        improvement before stopping (default 6); each 1 to 10000.
     progress : bool
+    force : bool
+        Train into an ``out`` that holds files training did not write (not another run).
 
     Returns
     -------
@@ -300,8 +302,12 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
     Raises
     ------
     VrechoError
-        For an unknown method, a missing or unfinished dataset, or an unwritable or foreign ``out``.
+        For an unknown method, a seed, ``epochs`` or ``patience`` out of range, a missing or
+        unfinished dataset, or an unwritable or foreign ``out``.
     """
+    for name, v, lo, hi in (("seed", seed, 0, 2**32 - 1), ("epochs", epochs, 1, 10000), ("patience", patience, 1, 10000)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
+            raise VrechoError(f"{name}: expected a whole number from {lo} to {hi}, got {v!r}")
     out = ensure_writable_dir(out)
     chosen = [method(m) for m in methods] if methods else list(METHODS)
     harness = Harness(data, seed=seed, progress=progress)
@@ -313,8 +319,9 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
         if old != identity:
             raise VrechoError(f"out: {out} holds models of another dataset or seed ({old.get('dataset')}, seed "
                               f"{old.get('seed')}); choose another folder")
-    elif any(out.iterdir()):
-        raise VrechoError(f"out: {out} is not empty and holds no vrecho run; choose an empty folder")
+    elif any(out.iterdir()) and not force:
+        raise VrechoError(f"out: {out} is not empty and holds no vrecho run; choose an empty folder, "
+                          "or pass --force to train beside its files")
     atomic_write_text(run_path, json.dumps(identity, indent=1))
     (out / "models").mkdir(exist_ok=True)
     records_path = out / "training.json"
@@ -410,7 +417,8 @@ def export_classifier(run, path) -> Path:
 # Evaluation: tables and figures
 
 
-def evaluate(data, run, out, *, seed: int = 0, progress: bool = True, methods=None) -> dict[str, dict]:
+def evaluate(data, run, out, *, seed: int = 0, progress: bool = True, methods=None,
+             force: bool = False) -> dict[str, dict]:
     """Judge every trained method on the test frames; write tables (Markdown and CSV), confusion
     matrices and the activation-maximisation figure into ``out``.
 
@@ -423,6 +431,9 @@ def evaluate(data, run, out, *, seed: int = 0, progress: bool = True, methods=No
     progress : bool
     methods : list of str, optional
         Names or slugs of :data:`METHODS` (default: every method trained in ``run``).
+    force : bool
+        Write into an ``out`` that holds files evaluation did not write (the policy of
+        :class:`vrecho.io.OutputFolder`: its files appear at once, when all are written).
 
     Returns
     -------
@@ -435,7 +446,11 @@ def evaluate(data, run, out, *, seed: int = 0, progress: bool = True, methods=No
     VrechoError
         For an unknown or untrained method, none trained in ``run``, a bad dataset or ``out``.
     """
-    out = ensure_writable_dir(out)
+    with OutputFolder(out, "evaluate", force=force) as folder:
+        return _evaluate(data, run, folder, seed, progress, methods)
+
+
+def _evaluate(data, run, folder: OutputFolder, seed: int, progress: bool, methods) -> dict[str, dict]:
     harness = Harness(data, seed=seed, progress=progress)
     chosen = [method(m) for m in methods] if methods else [m for m in METHODS if _trained(run, m)]
     if not chosen:
@@ -458,12 +473,13 @@ def evaluate(data, run, out, *, seed: int = 0, progress: bool = True, methods=No
         results[m.name], outputs[m.name] = res, o
     meta = {"seed": seed, "data": str(data), "n": {p: {s: len(harness.frames(p, s)) for s in ("train", "val", "test")}
                                                    for p in sorted({m.protocol for m in chosen})}}
-    write_tables(results, chosen, meta, out)
-    confusion_figures(outputs, chosen, harness, out)
     shown = {m.name: load_method(run, m) for m in chosen if m.name in ("EchoCNN-A", "EchoCNN-E")}
-    if shown:
-        activation_maximisation(shown, out / "activation_maximisation_depth.png")
-    atomic_write_text(out / "metrics.json", json.dumps({"meta": meta, "results": results}, indent=1))
+    with folder.writing() as out:
+        write_tables(results, chosen, meta, out)
+        confusion_figures(outputs, chosen, harness, out)
+        if shown:
+            activation_maximisation(shown, out / "activation_maximisation_depth.png")
+        atomic_write_text(out / "metrics.json", json.dumps({"meta": meta, "results": results}, indent=1))
     return results
 
 

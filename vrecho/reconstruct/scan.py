@@ -16,7 +16,7 @@ from tqdm import tqdm
 
 from ..camera import DEPTH_MAX_M, View
 from ..errors import VrechoError
-from ..io import ensure_writable_dir, read_mesh
+from ..io import ensure_writable_dir, read_mesh, write_mesh
 
 
 @dataclass
@@ -130,13 +130,11 @@ class Scan:
         VrechoError
             When the folder cannot be created or written in.
         """
-        import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
-
         folder = ensure_writable_dir(Path(folder))
         np.savez_compressed(folder / "frames.npz", depth=np.stack([v.depth for v in self.views]),
                             gray=np.stack([v.gray for v in self.views]), pose=np.stack([v.pose for v in self.views]),
                             intrinsics=self.views[0].intrinsics)
-        o3d.io.write_triangle_mesh(str(folder / "mesh.ply"), self.mesh)
+        write_mesh(folder / "mesh.ply", self.mesh)
         if self.echoes is not None:
             e = self.echoes
             np.savez_compressed(folder / "echoes.npz", frame=e.frame, audio=e.audio, fs=e.fs, emitted=e.emitted)
