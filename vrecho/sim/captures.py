@@ -15,7 +15,7 @@ from .. import colmap
 from ..camera import Camera, View, camera_pose, device_pose
 from ..capture.media import write_video
 from ..errors import VrechoError
-from ..io import ensure_writable_dir
+from ..io import ensure_writable_dir, write_mesh
 from ..reconstruct.scan import fuse
 from ..signals import FS, PERIOD_S, parabolic_peaks, probe
 from .acoustics import device_impulse_response, through_microphone
@@ -174,8 +174,6 @@ def simulate_capture(scene, folder, *, n_pulses: int = 20, fps: float = 4.0, cam
     VrechoError
         If ``folder`` cannot be written.
     """
-    import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
-
     camera = Camera() if camera is None else camera
     if scene.camera_path is None:
         scene = dataclasses.replace(scene, camera_path=walkthrough_path(scene))
@@ -201,7 +199,6 @@ def simulate_capture(scene, folder, *, n_pulses: int = 20, fps: float = 4.0, cam
     if video is None:
         write_video(path, np.stack(gray), fps, x, FS, audio_codec=audio_codec)
     else:
-        
         width, height, rate = video
         big = [np.asarray(Image.fromarray(g).resize((width, height), Image.BILINEAR), np.int16) for g in gray]
 
@@ -215,6 +212,6 @@ def simulate_capture(scene, folder, *, n_pulses: int = 20, fps: float = 4.0, cam
     names = [f"{k + 1:06d}.png" for k in range(len(views))]
     colmap.write_model(folder / "poses", colmap.pinhole(camera.intrinsics, camera.width, camera.height), names,
                        np.stack([v.pose for v in views]))
-    o3d.io.write_triangle_mesh(str(folder / "mesh.ply"), fuse(views, progress=progress))
+    write_mesh(folder / "mesh.ply", fuse(views, progress=progress))
     return {"video": path, "poses": folder / "poses", "mesh": folder / "mesh.ply", "fps": fps,
             "onsets_s": onsets / FS, "pulse_poses": np.stack(poses)}
