@@ -39,6 +39,7 @@ from scipy.ndimage import maximum_filter1d
 
 from ..device import MIC_ABOVE_EMITTER_M
 from ..errors import VrechoError, check_number
+from ..features import BAND_FS, clipped
 from ..signals import (FS, MIN_COHERENCE, PERIOD_S, SPEED_OF_SOUND, analytic_envelope, analytic_filter, check_fs,
                        coherence, parabolic_peaks, probe)
 
@@ -265,6 +266,54 @@ def find_onsets(audio, fs: int = FS, *, emitted=None, period_s: float = PERIOD_S
     return Onsets(samples, 20 * np.log10(env[idx] / floor), np.array(missing), period / fs, fs)
 
 
+def _emissions(onsets: Onsets, mic_offset_m: float | None) -> np.ndarray:
+    """Each pulse's emission, in fractional samples at ``onsets.fs``: its direct sound's onset less
+    its flight from the loudspeaker, ``mic_offset_m`` away (PROTOCOL's device by default)."""
+    if not isinstance(onsets, Onsets):
+        raise VrechoError(f"onsets: expected the Onsets find_onsets gives, got {type(onsets).__name__}")
+    offset = MIC_ABOVE_EMITTER_M if mic_offset_m is None else check_number(mic_offset_m, "mic_offset_m", lo=0.0, hi=3.0)
+    return onsets.samples - offset / SPEED_OF_SOUND * onsets.fs
+
+
+def frame_flags(audio, onsets: Onsets, index, *, length_s: float = 1.0,
+                mic_offset_m: float | None = None) -> list[tuple[str, ...]]:
+    """What the recording says of each frame :func:`cut_frames` cut from it, by EchoCNN's rules
+    (:mod:`vrecho.classifier`), before the resampling and the fractional shift (which ring past
+    the rail and hide clipping): ``clipped``, the frame's ``length_s`` as recorded
+    (:func:`vrecho.features.clipped`); ``low_rate``, a recording below
+    :data:`~vrecho.features.BAND_FS` (40 kHz: the probe's band does not fit).
+
+    Parameters
+    ----------
+    audio : numpy.ndarray [shape=(n,), (n, channels) or (channels, n)]
+        The recording, at ``onsets.fs`` (the first channel is used).
+    onsets : Onsets
+        Its pulses (:func:`find_onsets`).
+    index : numpy.ndarray [shape=(K,)], int
+        The onsets the frames were cut from (``cut_frames(..., return_index=True)``).
+    length_s, mic_offset_m : float
+        As given to :func:`cut_frames`.
+
+    Returns
+    -------
+    list of tuple of str
+        One per frame, for :meth:`~vrecho.classifier.Classifier.predict_batch`'s ``flags``.
+
+    Raises
+    ------
+    VrechoError
+        For arguments :func:`cut_frames` refuses, or an ``index`` outside the onsets.
+    """
+    at = _emissions(onsets, mic_offset_m)
+    x, fs = _mono(audio, onsets.fs)
+    n = int(round(check_number(length_s, "length_s", lo=0.01, hi=10.0) * fs))
+    index = np.asarray(index)
+    if index.dtype.kind not in "iu" or index.ndim != 1 or np.any(index < 0) or np.any(index >= len(at)):
+        raise VrechoError(f"index: expected onsets' indices 0 to {len(at) - 1}, got {index!r}")
+    low = ("low_rate",) if fs < BAND_FS else ()
+    return [(("clipped",) if clipped(x[i:i + n]) else ()) + low for i in np.maximum(np.floor(at[index]), 0).astype(int)]
+
+
 def cut_frames(audio, onsets: Onsets, *, length_s: float = 1.0, mic_offset_m: float | None = None,
                return_index: bool = False):
     """PROTOCOL.md's frames: ``length_s`` of the recording from each pulse's emission (the direct
@@ -314,8 +363,7 @@ def cut_frames(audio, onsets: Onsets, *, length_s: float = 1.0, mic_offset_m: fl
         raise VrechoError(f"onsets: expected the Onsets find_onsets gives, got {type(onsets).__name__}")
     x, fs = _mono(audio, onsets.fs)
     check_number(length_s, "length_s", lo=0.01, hi=10.0)
-    offset = MIC_ABOVE_EMITTER_M if mic_offset_m is None else check_number(mic_offset_m, "mic_offset_m", lo=0.0, hi=3.0)
-    starts = (onsets.samples - offset / SPEED_OF_SOUND * fs) * FS / fs
+    starts = _emissions(onsets, mic_offset_m) * FS / fs
     if fs != FS:
         x = librosa.resample(x, orig_sr=fs, target_sr=FS)
     n, pad = int(round(length_s * FS)), 64
