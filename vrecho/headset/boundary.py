@@ -67,7 +67,7 @@ import numpy as np
 from ..errors import VrechoError, check_number
 from ..signals import SPEED_OF_SOUND
 from .echoes import EchoFinder, echo_path, mic_geometry
-from .ranging import GUARD, Envelope, ProbeSchedule, clipped, probe_codes, zero_runs
+from .ranging import GUARD, Envelope, ProbeSchedule, channel0, clipped, pcm_scale, probe_codes, zero_runs
 from .roundtrip import RoundTrip
 from .tracks import Track, associate, clutter_strength
 from .view import look_all
@@ -337,23 +337,24 @@ class BoundaryMonitor:
             length, not a NumPy array or read-only; checked before anything is written or
             heard.
         """
-        x = _channel0(np.asarray(mic), "mic")
+        x = channel0(np.asarray(mic), "mic")
         n = len(x)
         if speaker is not None:
             if not isinstance(speaker, np.ndarray):
                 raise VrechoError(f"speaker: expected a NumPy array to fill in place, got {type(speaker).__name__}")
-            _channel0(speaker, "speaker")
+            channel0(speaker, "speaker")
             if len(speaker) != n:
                 raise VrechoError(f"speaker: expected {n} frames like the microphone block, got {len(speaker)}")
             if not speaker.flags.writeable:
                 raise VrechoError("speaker: the block is read-only; the monitor writes its probe into it")
             block = self.speaker_block(n)
             if speaker.dtype.kind != "f":  # PCM: the probe (peak under 1) scaled to the integers' full scale
-                offset, scale = _pcm(speaker.dtype)
-                block = np.round(offset + scale * np.clip(block, -1.0, 1.0))
+                offset, scale = pcm_scale(speaker.dtype)
+                info = np.iinfo(speaker.dtype)
+                block = np.clip(np.round(offset + scale * block), info.min, info.max)
             speaker[...] = block[:, None] if speaker.ndim == 2 else block
         if x.dtype.kind != "f":
-            offset, scale = _pcm(x.dtype)
+            offset, scale = pcm_scale(x.dtype)
             x = (x.astype(np.float32) - offset) / scale
         self._written += n
         staged = self._staged
@@ -685,20 +686,6 @@ class BoundaryMonitor:
             conf = min(len(tr.dists), 10) / 10 * min(1.0, sum(tr.strengths) / len(tr.strengths) * 200)
             self._verdict = Alert(level, float(d), "closed", conf, float(closing), None if np.isinf(ttc) else float(ttc),
                                   (), float(at))
-
-
-def _channel0(a: np.ndarray, name: str) -> np.ndarray:
-    """Channel 0 of an audio block (frames,) or (frames, channels) of floats or PCM integers."""
-    if a.ndim not in (1, 2) or (a.ndim == 2 and a.shape[1] == 0) or a.dtype.kind not in "fiu":
-        raise VrechoError(f"{name}: expected a block (frames,) or (frames, channels) of floats or PCM integers "
-                          f"(sounddevice's float32, int32, int16, int8, uint8), got shape {a.shape} ({a.dtype})")
-    return a[:, 0] if a.ndim == 2 else a
-
-
-def _pcm(dtype: np.dtype) -> tuple[float, float]:
-    """The zero and full scale of integer samples (PCM: uint8 centred on 128)."""
-    info = np.iinfo(dtype)
-    return (0.0, -float(info.min)) if info.min < 0 else ((info.max + 1) / 2, (info.max + 1) / 2)
 
 
 _RANK = {"clear": 0, "caution": 1, "stop": 2}
