@@ -14,8 +14,12 @@ audio, emitted, image         EchoCNN-EV
 
 Bad input never reaches torch: a frame of the wrong length, NaN or infinite samples, a silent
 frame or a malformed image or emitted sound is a :class:`~vrecho.errors.VrechoError`; another
-sample rate is resampled; a clipped frame or an emitted sound that is not broadband is answered,
-flagged and marked low-confidence.
+sample rate is resampled. A frame valid in form that carries no trustworthy answer is answered,
+flagged, marked low-confidence and its ``confidence`` held at most :data:`FLAGGED_CONFIDENCE`
+(0.5, a coin's): ``clipped`` (tested on the samples as given, before resampling),
+``low_rate`` (recorded below :data:`~vrecho.features.BAND_FS`, 40 kHz: the probe's band does
+not fit), ``no_pulse`` (the frame does not begin with a pulse: see :meth:`Classifier.predict_batch`)
+and ``narrowband_emitted``. ``vrecho capture`` flags its frames by the same rules.
 """
 
 from __future__ import annotations
@@ -28,16 +32,23 @@ import numpy as np
 import torch
 
 from .errors import VrechoError
-from .features import check_emitted, check_frames, echo_features, logmel
+from .features import BAND_FS, check_emitted, check_frames, clipped, echo_features, logmel
 from .models import DEPTH_BINS_M, build
-from .signals import FS, check_fs
+from .signals import FS, MIN_COHERENCE, PULSE_S, analytic_envelope, analytic_filter, check_fs, coherence
 
 CONFIDENCE_FLOOR = 0.7
 """Below this open/closed probability an answer is marked low-confidence."""
+FLAGGED_CONFIDENCE = 0.5
+"""The most ``confidence`` a flagged answer gets: nothing vouches for it."""
 SILENCE_RMS = 1e-6
-CLIP_LEVEL = 0.999
-CLIP_SHARE = 1e-3
-"""A frame with at least this share of samples at full scale (|x| >= 0.999) is clipped."""
+PULSE_LAG_S = 0.01
+"""How late a frame's direct sound may begin, in seconds (the loudspeaker up to 3 m away)."""
+PULSE_ABOVE_TAIL_DB = 6.0
+"""With the emitted sound unknown, a frame's first 100 ms (the sound) must be this much louder
+than its second half (the room's decay and the noise; 20 dB and more in EchoCNN's training
+frames): steady noise, a tone or speech throughout is not a pulse."""
+FLAGS = ("clipped", "low_rate", "no_pulse", "narrowband_emitted")
+"""The flags an answer may carry (:class:`Prediction`)."""
 
 
 @dataclass
@@ -56,13 +67,15 @@ class Prediction:
         ``open``, ``closed``, ``glass``, ``mirror``, and ``depth_<m>`` per 0.5 m class
         (``depth_0.5`` to ``depth_3``).
     confidence : float
-        Probability of the open/closed answer.
+        Probability of the open/closed answer; at most :data:`FLAGGED_CONFIDENCE` (0.5) when a
+        flag is set.
     low_confidence : bool
         True when ``confidence`` is below :data:`CONFIDENCE_FLOOR` or any flag is set.
     model : str
         Which variant answered, e.g. "EchoCNN-A".
     flags : tuple of str
-        Why, beyond the probability: ``clipped``, ``narrowband_emitted``; empty by default.
+        Why, beyond the probability: names of :data:`FLAGS` (see the module's notes); empty by
+        default.
     source_m : tuple of 3 float or None
         Where a source heard in the frame sits, forward/left/up from the device in metres, for
         frames of an ambient source; None when the emitted sound is given: the frame is then the
@@ -149,12 +162,18 @@ class Classifier:
                 raise VrechoError(f"emitted: expected a 1-D sound, got shape {emitted.shape}")
         return self.predict_batch(x[None], fs, images=image, emitted=emitted)[0]
 
-    def predict_batch(self, audio, fs: int, *, images=None, emitted=None) -> list[Prediction]:
+    def predict_batch(self, audio, fs: int, *, images=None, emitted=None, flags=None) -> list[Prediction]:
         """Many frames at once, each answered as by :meth:`predict`.
 
-        A frame with at least :data:`CLIP_SHARE` of its samples at full scale is flagged
-        ``clipped``; an emitted sound that leaves part of 200 Hz to 16 kHz more than 40 dB below
-        its strongest octave is flagged ``narrowband_emitted``.
+        Answers that nothing vouches for are flagged (low-confidence, ``confidence`` at most
+        :data:`FLAGGED_CONFIDENCE`): ``clipped``, at least :data:`~vrecho.features.CLIP_SHARE`
+        of a frame's samples at full scale as given (before resampling); ``low_rate``, ``fs``
+        below :data:`~vrecho.features.BAND_FS` (40 kHz); ``no_pulse``, a frame that does not
+        begin with a pulse: with ``emitted``, no window within :data:`PULSE_LAG_S` of its start
+        that the emitted sound explains by :data:`~vrecho.signals.MIN_COHERENCE` (its matched
+        filter), without it, a first 100 ms less than :data:`PULSE_ABOVE_TAIL_DB` above the
+        second half; ``narrowband_emitted``, an emitted sound that leaves part of 200 Hz to
+        16 kHz more than 40 dB below its strongest octave.
 
         Parameters
         ----------
@@ -167,36 +186,49 @@ class Classifier:
             The camera crops, uint8, or float in [0, 1]; or None.
         emitted : array_like, shape (k,) or (B, k), float, optional
             One sound for all frames or one per frame, at ``fs``; or None.
+        flags : sequence of B sequences of str, optional
+            What the caller knows of each frame's origin, names of :data:`FLAGS` (a frame cut
+            from a clipped or low-rate recording and resampled: ``vrecho capture``); flagged as
+            those found here.
 
         Returns
         -------
         list of Prediction
-            One per frame, in order.
+            One per frame, in order (none for an empty batch).
 
         Raises
         ------
         VrechoError
             For frames :func:`~vrecho.features.check_frames` refuses or a silent frame (RMS
-            below 1e-6), emitted sounds :func:`~vrecho.features.check_emitted` refuses, or
-            images of another shape, or not uint8 or finite floats in [0, 1].
+            below 1e-6), emitted sounds :func:`~vrecho.features.check_emitted` refuses,
+            images of another shape, or not uint8 or finite floats in [0, 1], or ``flags``
+            not B sequences of names of :data:`FLAGS`.
         """
         x = check_frames(audio, fs)
+        raw = np.asarray(audio)  # as given, checked: clipping is tested before resampling rings past the rail
         if x.ndim == 1:
-            x = x[None]
+            x, raw = x[None], raw[None]
         fs = check_fs(fs)
+        given = _check_flags(flags, len(x))
+        if not len(x):
+            return []
         rms = np.sqrt(np.mean(x.astype(np.float64) ** 2, axis=1))
         if np.any(rms < SILENCE_RMS):
-            raise VrechoError(f"audio: frame {int(np.argmax(rms < SILENCE_RMS))} is silent (RMS below {SILENCE_RMS:g}): "
-                              "is the microphone on?")
-        peak = np.abs(x).max(axis=1, keepdims=True)
-        clipped = np.mean(np.abs(x) >= CLIP_LEVEL * np.maximum(peak, 1.0), axis=1) >= CLIP_SHARE
-        batch, key, narrow = {}, "A", np.zeros(len(x), bool)
+            raise VrechoError(f"audio: frame {int(np.argmax(rms < SILENCE_RMS))} is silent "
+                              f"(RMS below {SILENCE_RMS:g}): is the microphone on?")
+        found = {"clipped": clipped(raw), "low_rate": np.full(len(x), fs < BAND_FS)}
+        batch, key = {}, "A"
         if emitted is not None:
             s = check_emitted(emitted, fs, len(x))
             f = echo_features(x, s, FS)
             batch["envelope"], batch["bands"] = torch.as_tensor(f.envelope), torch.as_tensor(f.bands)
-            narrow = np.broadcast_to(_narrowband(s), (len(x),))
+            found["narrowband_emitted"] = np.broadcast_to(_narrowband(s), (len(x),))
+            found["no_pulse"] = ~_begins_with(x, s)
             key = "E"
+        else:
+            head = np.sqrt(np.mean(x[:, :int(PULSE_S * FS)].astype(np.float64) ** 2, axis=1))
+            tail = np.sqrt(np.mean(x[:, FS // 2:].astype(np.float64) ** 2, axis=1))
+            found["no_pulse"] = head < tail * 10 ** (PULSE_ABOVE_TAIL_DB / 20)
         if images is not None:
             batch["image"] = torch.as_tensor(_check_images(images, len(x)))
             key += "V"
@@ -210,17 +242,48 @@ class Classifier:
         p_depth = torch.softmax(out["depth_bin"], 1).numpy()
         preds = []
         for i in range(len(x)):
+            flagged = tuple(name for name in FLAGS if name in given[i] or (name in found and found[name][i]))
             conf = float(max(p_open[i], 1 - p_open[i]))
-            flags = tuple(name for name, on in (("clipped", clipped[i]), ("narrowband_emitted", narrow[i])) if on)
+            if flagged:
+                conf = min(conf, FLAGGED_CONFIDENCE)
             probs = {"open": float(p_open[i]), "closed": float(1 - p_open[i]), "glass": float(1 - p_mirror[i]),
                      "mirror": float(p_mirror[i])}
             probs.update({f"depth_{d:g}": float(p) for d, p in zip(DEPTH_BINS_M, p_depth[i])})
             preds.append(Prediction(is_open=bool(p_open[i] > 0.5), material="mirror" if p_mirror[i] > 0.5 else "glass",
                                     depth_m=float(out["depth_m"][i]), probabilities=probs, confidence=conf,
-                                    low_confidence=conf < CONFIDENCE_FLOOR or bool(flags), model=self.names[key],
-                                    flags=flags,
+                                    low_confidence=conf < CONFIDENCE_FLOOR or bool(flagged), model=self.names[key],
+                                    flags=flagged,
                                     source_m=None if emitted is not None else tuple(float(v) for v in out["src_m"][i])))
         return preds
+
+
+def _check_flags(flags, n: int) -> list[tuple[str, ...]]:
+    if flags is None:
+        return [()] * n
+    try:
+        out = [tuple(f) for f in flags]
+    except TypeError:
+        raise VrechoError(f"flags: expected one sequence of flag names per frame, got {type(flags).__name__}") from None
+    bad = {f for row in out for f in row if not isinstance(f, str) or f not in FLAGS}
+    if len(out) != n or bad:
+        raise VrechoError(f"flags: expected {n} sequences of names of {FLAGS}, got {len(out)}"
+                          + (f" with {sorted(map(repr, bad))}" if bad else ""))
+    return out
+
+
+def _begins_with(x: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Whether each frame (B, n) begins with its emitted sound, ``s`` (k,) or (B, k) at 44.1 kHz:
+    a window within :data:`PULSE_LAG_S` of the frame's start that the sound explains by
+    :data:`~vrecho.signals.MIN_COHERENCE`."""
+    ss = np.broadcast_to(s, (len(x), s.shape[-1])).astype(np.float64)
+    k = ss.shape[1]
+    m = min(k + int(PULSE_LAG_S * FS), x.shape[1])
+    n = 1 << int(np.ceil(np.log2(m + k)))
+    out = np.zeros(len(x), bool)
+    for i, (frame, sound) in enumerate(zip(x[:, :m].astype(np.float64), ss)):
+        env = analytic_envelope(frame, analytic_filter(sound, n), n)[:m - k + 1] / np.linalg.norm(sound)
+        out[i] = coherence(frame, env, k).max() >= MIN_COHERENCE
+    return out
 
 
 _NAMES = {"A": "EchoCNN-A", "AV": "EchoCNN-AV", "E": "EchoCNN-E", "EV": "EchoCNN-EV"}

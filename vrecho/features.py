@@ -32,6 +32,35 @@ FRAME_S = 1.0
 ECHO_WINDOW_S = 0.03
 """Length of the early impulse response kept as an echo feature: round trips up to 5 m."""
 DECAY_BANDS_HZ = (125, 250, 500, 1000, 2000, 4000, 8000)
+BAND_FS = 40_000
+"""The lowest sample rate, in Hz, that holds the probe's band (200 Hz to 18 kHz, up to 0.45 of
+the rate): EchoCNN learned from 44.1 kHz frames, so a frame recorded at a lower rate, resampled,
+lacks what it reads depth and material from (an 8 kHz frame said 3.43 m where 44.1 kHz said
+1.20 m)."""
+CLIP_LEVEL = 0.999
+CLIP_SHARE = 1e-3
+"""A frame with at least this share of samples at full scale (|x| >= 0.999, or 0.999 of its own
+peak above 1) is clipped."""
+
+
+def clipped(audio) -> np.ndarray:
+    """Which frames are clipped, tested on the samples as recorded: resampling or a fractional
+    shift rings past the rail (Gibbs), and the flat tops no longer sit at the peak.
+
+    Parameters
+    ----------
+    audio : numpy.ndarray [shape=(n,) or (B, n)], numbers
+        Frames at their own rate, finite (as :func:`check_frames` takes them).
+
+    Returns
+    -------
+    numpy.ndarray [shape=() or (B,)], bool
+        True where at least :data:`CLIP_SHARE` of a frame's samples reach :data:`CLIP_LEVEL`
+        of full scale (of the frame's peak, where that exceeds 1).
+    """
+    mag = np.abs(np.asarray(audio, np.float64))
+    peak = mag.max(axis=-1, keepdims=True) if mag.shape[-1] else np.ones(mag.shape[:-1] + (1,))
+    return np.mean(mag >= CLIP_LEVEL * np.maximum(peak, 1.0), axis=-1) >= CLIP_SHARE
 
 
 def check_frames(audio, fs) -> np.ndarray:

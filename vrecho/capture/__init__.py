@@ -2,7 +2,8 @@
 EchoCNN's answers, and with COLMAP's poses and the user's mesh, the mesh repaired.
 
 - onsets.py: the pulses of a recording (:func:`find_onsets`) and PROTOCOL.md's frames cut from
-  them (:func:`cut_frames`); :data:`PULSE_TRAIN_WAV` is the train for the second phone to play;
+  them (:func:`cut_frames`), flagged where the recording is clipped or its rate too low
+  (:func:`frame_flags`); :data:`PULSE_TRAIN_WAV` is the train for the second phone to play;
 - media.py: videos and sound files read (PyAV, soundfile) and written;
 - posing.py: COLMAP's poses of the pictures on the recording's clock (:func:`read_poses`), and the
   scan of the user's mesh seen from each pulse (:func:`posed_scan`);
@@ -13,10 +14,10 @@ EchoCNN's answers, and with COLMAP's poses and the user's mesh, the mesh repaire
 """
 
 from .media import read_audio, read_video, video_images, write_video
-from .onsets import PULSE_TRAIN_WAV, Onsets, cut_frames, find_onsets, matched_envelope
+from .onsets import PULSE_TRAIN_WAV, Onsets, cut_frames, find_onsets, frame_flags, matched_envelope
 from .pipeline import Analysis, Recording, analyse, answers, open_capture
 from .posing import Poses, interpolate_poses, posed_scan, read_poses
 
 __all__ = ["PULSE_TRAIN_WAV", "Analysis", "Onsets", "Poses", "Recording", "analyse", "answers", "cut_frames",
-           "find_onsets", "interpolate_poses", "matched_envelope", "open_capture", "posed_scan", "read_audio",
-           "read_poses", "read_video", "video_images", "write_video"]
+           "find_onsets", "frame_flags", "interpolate_poses", "matched_envelope", "open_capture", "posed_scan",
+           "read_audio", "read_poses", "read_video", "video_images", "write_video"]

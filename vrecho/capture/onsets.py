@@ -10,7 +10,9 @@ door slam or lost to a dropout, the microphone clips. :func:`find_onsets` finds 
    (analytic signal): a pulse's direct sound stands out by the pulse's time-bandwidth product
    (about 36 dB for the 100 ms probe) above noise, and clipping keeps the peak where it was.
 2. **Candidates.** The strongest lag within each half period, at least ``min_snr_db`` above the
-   envelope's median (the noise floor).
+   envelope's median (the noise floor), of the sounds shaped like the pulse: where the matched
+   filter explains at least :data:`~vrecho.signals.MIN_COHERENCE` of the window's energy
+   (speech, claps and noise bursts rise above the noise too, but are not shaped like a sweep).
 3. **The train.** The period is measured (the median spacing of candidates 0.95 to 1.05 nominal
    periods apart: the clocks' drift); a candidate is a pulse when another lies one to four whole
    periods away (within ``tolerance_s`` per period): a clap or a door does not recur on the
@@ -18,15 +20,15 @@ door slam or lost to a dropout, the microphone clips. :func:`find_onsets` finds 
    two pauses, as loud as the train to 1.5 dB). Where two pulses lie a whole number of periods
    apart (to a millisecond a period), the pulses between are missing; where the gap is not
    whole (the player paused, or looped its file), the train starts again and nothing is
-   missing. A
-   stronger echo is not taken for the direct sound: the onset is the highest lag within a
-   quarter millisecond of the first, within 20 ms before the peak, whose envelope reaches half
-   of it.
+   missing; fewer than half the gaps whole is no train (pulses played at random). A stronger
+   echo is not taken for the direct sound: the onset is the highest lag within a quarter
+   millisecond of the first, within 20 ms before the peak, whose envelope reaches half of it.
 4. **Sub-sample time.** A parabola through the envelope's three samples at the peak.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -36,14 +38,15 @@ from scipy import fft
 from scipy.ndimage import maximum_filter1d
 
 from ..device import MIC_ABOVE_EMITTER_M
-from ..errors import VrechoError
-from ..signals import FS, PERIOD_S, SPEED_OF_SOUND, analytic_envelope, analytic_filter, parabolic_peaks, probe
+from ..errors import VrechoError, check_number
+from ..features import BAND_FS, clipped
+from ..signals import (FS, MIN_COHERENCE, PERIOD_S, SPEED_OF_SOUND, analytic_envelope, analytic_filter, check_fs,
+                       coherence, parabolic_peaks, probe)
 
 PULSE_TRAIN_WAV = Path(__file__).resolve().parent.parent / "assets" / "pulse_train.wav"
 """The pulse train for the second phone to play (on repeat): 30 s of vrecho's probe once a
 second (:func:`~vrecho.signals.pulse_train` of :func:`~vrecho.signals.probe`), 44.1 kHz, 16-bit
 PCM. A player's gap at the loop's seam costs nothing: :func:`find_onsets` restarts the train."""
-
 
 @dataclass
 class Onsets:
@@ -76,16 +79,17 @@ class Onsets:
 
 
 def _mono(audio, fs) -> tuple[np.ndarray, int]:
-    x = np.asarray(audio, dtype=np.float64)
+    fs = check_fs(fs)
+    x = np.asarray(audio)
+    if x.dtype.kind not in "fiu" or x.ndim not in (1, 2) or x.size == 0:
+        raise VrechoError(f"audio: expected a non-empty 1-D recording (or channels x samples) of real numbers, "
+                          f"got shape {x.shape} ({x.dtype})")
     if x.ndim == 2:  # (n, channels) or (channels, n): the first channel
         x = x[:, 0] if x.shape[0] > x.shape[1] else x[0]
-    if x.ndim != 1 or x.size == 0:
-        raise VrechoError(f"audio: expected a 1-D recording (or channels x samples), got shape {np.shape(audio)}")
+    x = x.astype(np.float64)
     if not np.all(np.isfinite(x)):
         raise VrechoError("audio: the recording holds NaN or infinite samples")
-    if not isinstance(fs, (int, np.integer)) or fs < 8000:
-        raise VrechoError(f"fs: expected an integer sample rate of at least 8000 Hz, got {fs!r}")
-    return x, int(fs)
+    return x, fs
 
 
 def matched_envelope(audio, emitted, fs: int = FS) -> np.ndarray:
@@ -99,7 +103,7 @@ def matched_envelope(audio, emitted, fs: int = FS) -> np.ndarray:
     emitted : numpy.ndarray [shape=(k,)]
         The pulse played, at ``fs``; 8 to n samples.
     fs : int
-        Sample rate of both, in Hz (at least 8000; default 44100).
+        Sample rate of both, in Hz (8000 to 384000, :func:`~vrecho.signals.check_fs`; default 44100).
 
     Returns
     -------
@@ -109,9 +113,9 @@ def matched_envelope(audio, emitted, fs: int = FS) -> np.ndarray:
     Raises
     ------
     VrechoError
-        For an empty recording, one of more than two dimensions or with NaN or infinite
-        samples; a sample rate that is not an integer of at least 8000 Hz; a pulse that is not
-        1-D, or shorter than 8 samples, or longer than the recording.
+        For an empty recording, one of more than two dimensions, not of real numbers or with
+        NaN or infinite samples; a sample rate :func:`~vrecho.signals.check_fs` refuses; a
+        pulse that is not 1-D, or shorter than 8 samples, or longer than the recording.
     """
     x, _ = _mono(audio, fs)
     return _envelope(x, _pulse(emitted, x.size))
@@ -122,6 +126,14 @@ def _pulse(emitted, n: int) -> np.ndarray:
     if s.ndim != 1 or not 8 <= s.size <= n:
         raise VrechoError(f"emitted: expected a 1-D pulse shorter than the recording ({n} samples), got shape {s.shape}")
     return s
+
+
+@functools.lru_cache(maxsize=4)
+def _played_probe(fs: int) -> np.ndarray:
+    """vrecho's probe as :data:`PULSE_TRAIN_WAV` plays it (44.1 kHz), heard at ``fs``: a
+    recorder at a lower rate keeps the sweep's lower part, at its own times."""
+    s = probe(FS).astype(np.float64)
+    return s if fs == FS else librosa.resample(s, orig_sr=FS, target_sr=fs)
 
 
 def _envelope(x: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -139,9 +151,10 @@ def find_onsets(audio, fs: int = FS, *, emitted=None, period_s: float = PERIOD_S
     audio : numpy.ndarray [shape=(n,), (n, channels) or (channels, n)]
         The recording (the first channel is used: the longer axis is taken for time).
     fs : int
-        Its sample rate in Hz (at least 8000; default 44100).
+        Its sample rate in Hz (8000 to 384000; default 44100).
     emitted : numpy.ndarray [shape=(k,)], optional
-        The pulse played, at ``fs`` (default: vrecho's probe, :func:`~vrecho.signals.probe`).
+        The pulse played, at ``fs`` (default: vrecho's probe as :data:`PULSE_TRAIN_WAV` plays it,
+        at 44.1 kHz, resampled to ``fs``: below 40 kHz the recorder keeps the sweep's lower part).
     period_s : float
         The nominal period in seconds (PROTOCOL.md: 1 s; 0.1 to 10 s); the measured one may
         differ by a few per cent.
@@ -160,8 +173,11 @@ def find_onsets(audio, fs: int = FS, *, emitted=None, period_s: float = PERIOD_S
     Raises
     ------
     VrechoError
-        When no pulse train is found (fewer than two pulses a period apart); for a
-        ``period_s`` outside 0.1 to 10 s; and for a recording, rate or pulse
+        When no pulse train is found: fewer than two sounds shaped like the pulse
+        (:data:`~vrecho.signals.MIN_COHERENCE`) a period apart, or fewer than half the gaps
+        between them whole periods (speech, noise bursts, a pulse played at random times); for a ``period_s``
+        outside 0.1 to 10 s, a ``min_snr_db`` outside 0 to 60, a ``tolerance_s`` outside
+        0.0001 to 0.1 s, a recording shorter than the pulse; and for a recording, rate or pulse
         :func:`matched_envelope` refuses.
 
     Examples
@@ -180,16 +196,30 @@ def find_onsets(audio, fs: int = FS, *, emitted=None, period_s: float = PERIOD_S
     0
     """
     x, fs = _mono(audio, fs)
-    s = probe(fs) if emitted is None else _pulse(emitted, x.size)
-    if not 0.1 <= period_s <= 10:
-        raise VrechoError(f"period_s: expected 0.1 to 10 s, got {period_s}")
+    s = _played_probe(fs) if emitted is None else _pulse(emitted, x.size)
+    if isinstance(period_s, bool) or not isinstance(period_s, (int, float, np.integer, np.floating)) \
+            or not 0.1 <= period_s <= 10:
+        raise VrechoError(f"period_s: expected 0.1 to 10 s, got {period_s!r}")
+    for name, v, lo, hi in (("min_snr_db", min_snr_db, 0, 60), ("tolerance_s", tolerance_s, 1e-4, 0.1)):
+        check_number(v, name, lo=lo, hi=hi)
+    if x.size < s.size:
+        raise VrechoError(f"audio: {x.size / fs:.3f} s is shorter than one pulse ({s.size / fs:.3f} s)")
     env = _envelope(x, s)
     period = period_s * fs
     floor = float(np.median(env)) + 1e-12
+    loud = env > floor * 10 ** (min_snr_db / 20)
+    # Only what has the pulse's shape: speech, claps, doors and noise bursts rise above the noise
+    # too, but the matched filter gathers a small share of their energy (coherence 0.2 or less).
+    shaped = loud & (coherence(x, env, s.size) >= MIN_COHERENCE)
+    if not shaped.any():
+        raise VrechoError(f"audio: no pulse train found: {'nothing' if not loud.any() else 'no sound'} "
+                          f"{min_snr_db:g} dB above the noise has the shape of vrecho's probe (its matched "
+                          f"filter) in {x.size / fs:.1f} s; expected the probe every {period_s:g} s")
+    env_shaped = np.where(shaped, env, 0.0)
     half = max(int(period // 2), 1)
-    peaks = np.flatnonzero((env == maximum_filter1d(env, half, mode="nearest")) & (env > floor * 10 ** (min_snr_db / 20)))
+    peaks = np.flatnonzero((env_shaped == maximum_filter1d(env_shaped, half, mode="nearest")) & shaped)
     if len(peaks) < 2:
-        raise VrechoError(f"audio: no pulse train found ({len(peaks)} pulse(s) {min_snr_db:.0f} dB above the noise "
+        raise VrechoError(f"audio: no pulse train found ({len(peaks)} pulse(s) {min_snr_db:g} dB above the noise "
                           f"in {x.size / fs:.1f} s); expected vrecho's pulse every {period_s:g} s")
     # The train: candidates with another a whole number of periods away (up to four: pulses may be
     # missing on both sides); a clap or a door does not recur on the period.
@@ -223,7 +253,10 @@ def find_onsets(audio, fs: int = FS, *, emitted=None, period_s: float = PERIOD_S
     gaps = np.diff(samples)
     k = np.round(gaps / period)
     whole = (k >= 1) & (np.abs(gaps - k * period) <= tol * np.maximum(k, 1))
-    period = float(np.median(gaps[whole] / k[whole])) if whole.any() else period
+    if whole.sum() < len(gaps) / 2:  # a train restarts now and then (a pause, a loop), not at every pulse
+        raise VrechoError(f"audio: no pulse train found: of {len(samples)} probe-shaped sounds, {int(whole.sum())} of "
+                          f"{len(gaps)} gaps are whole periods ({period_s:g} s, within {tolerance_s * 1000:g} ms)")
+    period = float(np.median(gaps[whole] / k[whole]))
     # Missing pulses: where two found lie a whole number of periods apart, to a millisecond a
     # period (the player's clock keeps the beat to a sample); any other gap (the player paused,
     # or looped its file) starts the train again and misses nothing.
@@ -231,6 +264,54 @@ def find_onsets(audio, fs: int = FS, *, emitted=None, period_s: float = PERIOD_S
     missing = [a + j * g / m for a, g, m in zip(samples, gaps, k)
                if m >= 2 and abs(g - m * period) <= 0.001 * fs * m for j in range(1, m)]
     return Onsets(samples, 20 * np.log10(env[idx] / floor), np.array(missing), period / fs, fs)
+
+
+def _emissions(onsets: Onsets, mic_offset_m: float | None) -> np.ndarray:
+    """Each pulse's emission, in fractional samples at ``onsets.fs``: its direct sound's onset less
+    its flight from the loudspeaker, ``mic_offset_m`` away (PROTOCOL's device by default)."""
+    if not isinstance(onsets, Onsets):
+        raise VrechoError(f"onsets: expected the Onsets find_onsets gives, got {type(onsets).__name__}")
+    offset = MIC_ABOVE_EMITTER_M if mic_offset_m is None else check_number(mic_offset_m, "mic_offset_m", lo=0.0, hi=3.0)
+    return onsets.samples - offset / SPEED_OF_SOUND * onsets.fs
+
+
+def frame_flags(audio, onsets: Onsets, index, *, length_s: float = 1.0,
+                mic_offset_m: float | None = None) -> list[tuple[str, ...]]:
+    """What the recording says of each frame :func:`cut_frames` cut from it, by EchoCNN's rules
+    (:mod:`vrecho.classifier`), before the resampling and the fractional shift (which ring past
+    the rail and hide clipping): ``clipped``, the frame's ``length_s`` as recorded
+    (:func:`vrecho.features.clipped`); ``low_rate``, a recording below
+    :data:`~vrecho.features.BAND_FS` (40 kHz: the probe's band does not fit).
+
+    Parameters
+    ----------
+    audio : numpy.ndarray [shape=(n,), (n, channels) or (channels, n)]
+        The recording, at ``onsets.fs`` (the first channel is used).
+    onsets : Onsets
+        Its pulses (:func:`find_onsets`).
+    index : numpy.ndarray [shape=(K,)], int
+        The onsets the frames were cut from (``cut_frames(..., return_index=True)``).
+    length_s, mic_offset_m : float
+        As given to :func:`cut_frames`.
+
+    Returns
+    -------
+    list of tuple of str
+        One per frame, for :meth:`~vrecho.classifier.Classifier.predict_batch`'s ``flags``.
+
+    Raises
+    ------
+    VrechoError
+        For arguments :func:`cut_frames` refuses, or an ``index`` outside the onsets.
+    """
+    at = _emissions(onsets, mic_offset_m)
+    x, fs = _mono(audio, onsets.fs)
+    n = int(round(check_number(length_s, "length_s", lo=0.01, hi=10.0) * fs))
+    index = np.asarray(index)
+    if index.dtype.kind not in "iu" or index.ndim != 1 or np.any(index < 0) or np.any(index >= len(at)):
+        raise VrechoError(f"index: expected onsets' indices 0 to {len(at) - 1}, got {index!r}")
+    low = ("low_rate",) if fs < BAND_FS else ()
+    return [(("clipped",) if clipped(x[i:i + n]) else ()) + low for i in np.maximum(np.floor(at[index]), 0).astype(int)]
 
 
 def cut_frames(audio, onsets: Onsets, *, length_s: float = 1.0, mic_offset_m: float | None = None,
@@ -265,7 +346,9 @@ def cut_frames(audio, onsets: Onsets, *, length_s: float = 1.0, mic_offset_m: fl
     Raises
     ------
     VrechoError
-        For a recording or rate :func:`matched_envelope` refuses.
+        For a recording or rate :func:`matched_envelope` refuses, ``onsets`` that are not
+        :class:`Onsets`, a ``length_s`` outside 0.01 to 10 s or a ``mic_offset_m`` outside 0
+        to 3 m.
 
     Examples
     --------
@@ -276,9 +359,11 @@ def cut_frames(audio, onsets: Onsets, *, length_s: float = 1.0, mic_offset_m: fl
     >>> cut_frames(x, find_onsets(x, 44100)).shape
     (4, 44100)
     """
+    if not isinstance(onsets, Onsets):
+        raise VrechoError(f"onsets: expected the Onsets find_onsets gives, got {type(onsets).__name__}")
     x, fs = _mono(audio, onsets.fs)
-    offset = MIC_ABOVE_EMITTER_M if mic_offset_m is None else mic_offset_m
-    starts = (onsets.samples - offset / SPEED_OF_SOUND * fs) * FS / fs
+    check_number(length_s, "length_s", lo=0.01, hi=10.0)
+    starts = _emissions(onsets, mic_offset_m) * FS / fs
     if fs != FS:
         x = librosa.resample(x, orig_sr=fs, target_sr=FS)
     n, pad = int(round(length_s * FS)), 64

@@ -19,7 +19,7 @@ from ..io import read_mesh
 from ..reconstruct import LABELS, Reconstruction, facing, reconstruct
 from ..signals import FS, probe
 from .media import image_files, load_pictures, read_audio, read_video, video_images
-from .onsets import Onsets, cut_frames, find_onsets
+from .onsets import Onsets, cut_frames, find_onsets, frame_flags
 from .posing import VIEW_WIDTH, Poses, posed_scan, read_poses
 
 
@@ -164,7 +164,7 @@ def open_capture(video=None, audio=None, images=None, poses=None, mesh=None, *, 
                      labels, emitter_distance_m)
 
 
-def answers(classifier, frames: np.ndarray, emitted: np.ndarray, *, images=None) -> list[dict]:
+def answers(classifier, frames: np.ndarray, emitted: np.ndarray, *, images=None, flags=None) -> list[dict]:
     """EchoCNN's answers for frames at 44.1 kHz, the probe ``emitted`` known (and the crops
     ``images``, if given), as ``frames.csv``'s columns.
 
@@ -178,20 +178,24 @@ def answers(classifier, frames: np.ndarray, emitted: np.ndarray, *, images=None)
         The probe played, at 44.1 kHz.
     images : numpy.ndarray [shape=(K, 64, 25)], uint8, optional
         The camera's crop around the surface in each frame.
+    flags : sequence of K sequences of str, optional
+        What is known of each frame's recording (:func:`~.onsets.frame_flags`), for EchoCNN to
+        flag the answer with (:meth:`~vrecho.classifier.Classifier.predict_batch`).
 
     Returns
     -------
     list of dict
         One per frame: ``model``, ``open``, ``material`` ("-" when open), ``depth_m``
-        (metres), ``p_open``, ``p_mirror``, ``confidence`` (rounded to 4 decimals) and
-        ``flags`` (space-separated).
+        (metres), ``p_open``, ``p_mirror``, ``confidence`` (rounded to 4 decimals; at most 0.5
+        for a flagged answer) and ``flags`` (space-separated: ``clipped``, ``low_rate``,
+        ``no_pulse``, ``narrowband_emitted``; :mod:`vrecho.classifier`).
 
     Raises
     ------
     VrechoError
         From EchoCNN, for frames or crops it cannot take (a silent frame, say).
     """
-    preds = classifier.predict_batch(frames, FS, images=images, emitted=emitted) if len(frames) else []
+    preds = classifier.predict_batch(frames, FS, images=images, emitted=emitted, flags=flags) if len(frames) else []
     return [{"model": p.model, "open": p.is_open, "material": "-" if p.is_open else p.material,
              "depth_m": round(float(p.depth_m), 4), "p_open": round(p.probabilities["open"], 4),
              "p_mirror": round(p.probabilities["mirror"], 4), "confidence": round(p.confidence, 4),
@@ -216,15 +220,18 @@ def analyse(rec: Recording, *, classifier=None) -> Analysis:
     -------
     Analysis
         Its ``rows`` hold each frame's ``frame`` and ``time_s`` (seconds) and :func:`answers`'
-        columns; with poses, a posed frame also has its position ``x_m``, ``y_m``, ``z_m``
-        (metres), and a frame facing a hole the ``hole``'s index and the answers asked again.
+        columns (a frame cut from a clipped stretch of the recording, or from a recording
+        below 40 kHz, is answered flagged and at most 0.5 confident:
+        :func:`~.onsets.frame_flags`); with poses, a posed frame also has its position
+        ``x_m``, ``y_m``, ``z_m`` (metres), and a frame facing a hole the ``hole``'s index and the answers asked again.
 
     Raises
     ------
     VrechoError
-        When no pulse train is found, no pulse has a whole second of recording after it, the
-        poses or mesh do not match the recording (:func:`~.posing.posed_scan`), or the mesh has
-        holes and no pulse was played facing one.
+        When no pulse train is found (speech, noise: :func:`~.onsets.find_onsets`), no pulse
+        has a whole second of recording after it, the poses or mesh do not match the recording
+        (:func:`~.posing.posed_scan`), or the mesh has holes and no pulse was played facing
+        one.
     """
     if classifier is None:
         from ..classifier import load_classifier  # torch-bound (1.7 s): only when EchoCNN is asked
@@ -235,6 +242,7 @@ def analyse(rec: Recording, *, classifier=None) -> Analysis:
     frames, kept = cut_frames(x, onsets, mic_offset_m=rec.emitter_distance_m, return_index=True)
     if not len(frames):
         raise VrechoError("capture: no pulse has a whole second of recording after it")
+    flags = frame_flags(x, onsets, kept, mic_offset_m=rec.emitter_distance_m)
     times = onsets.seconds[kept]  # a pulse too near either end of the recording has no frame
     width = VIEW_WIDTH if posed is not None else None
     if rec.video is not None:
@@ -248,7 +256,7 @@ def analyse(rec: Recording, *, classifier=None) -> Analysis:
         pictures = frame_pictures = None
     emitted = probe(FS)
     rows = [{"frame": k, "time_s": round(float(t), 6)} | a
-            for k, (t, a) in enumerate(zip(times, answers(classifier, frames, emitted)))]
+            for k, (t, a) in enumerate(zip(times, answers(classifier, frames, emitted, flags=flags)))]
     result = None
     if posed is not None:
         scan, ok = posed_scan(rec.mesh, posed, pictures, frames, times, frame_pictures, emitted)
@@ -266,6 +274,7 @@ def analyse(rec: Recording, *, classifier=None) -> Analysis:
             for i in facing(views, hole):
                 if i in frame_of and "hole" not in rows[frame_of[i]]:
                     crop, inside = crop_view(views[i], hole.corners())
-                    a = answers(classifier, frames[frame_of[i]][None], emitted, images=crop[None] if inside >= 0.98 else None)[0]
+                    a = answers(classifier, frames[frame_of[i]][None], emitted,
+                                images=crop[None] if inside >= 0.98 else None, flags=[flags[frame_of[i]]])[0]
                     rows[frame_of[i]].update(a, hole=h)
     return Analysis(onsets, frames, times, rows, frame_pictures, result)

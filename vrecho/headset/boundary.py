@@ -64,10 +64,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import VrechoError
+from ..errors import VrechoError, check_number
 from ..signals import SPEED_OF_SOUND
 from .echoes import EchoFinder, echo_path, mic_geometry
-from .ranging import GUARD, Envelope, ProbeSchedule, clipped, probe_codes, zero_runs
+from .ranging import GUARD, Envelope, ProbeSchedule, channel0, clipped, pcm_scale, probe_codes, zero_runs
 from .roundtrip import RoundTrip
 from .tracks import Track, associate, clutter_strength
 from .view import look_all
@@ -179,7 +179,10 @@ class BoundaryMonitor:
     Raises
     ------
     VrechoError
-        For another sample rate, a ``period_s`` out of range, or thresholds out of order.
+        For another sample rate, a ``period_s`` out of range, thresholds out of order, a
+        parameter that is not a finite number at least 0 (``threshold`` at least 1,
+        ``max_range_m`` at least 0.05, above ``min_range_m``) or a ``seed`` that is not a
+        whole number at least 0.
 
     Examples
     --------
@@ -198,8 +201,20 @@ class BoundaryMonitor:
                  mic_offset_m=0.07, caution_ttc_s: float = 2.0, caution_m: float = 1.0, stop_m: float = 0.5,
                  hysteresis_m: float = 0.1, approach_m: float = 0.12, miss_m: float = 0.4, threshold: float = 3.5,
                  on_alert=None):
-        if fs not in (44100, 48000):
+        if isinstance(fs, bool) or not isinstance(fs, (int, float, np.integer, np.floating)) \
+                or fs not in (44100, 48000):
             raise VrechoError(f"fs: expected 44100 or 48000 Hz, got {fs!r}")
+        fs = int(fs)
+        for name, v, lo in (("period_s", period_s, 0.0), ("dither_s", dither_s, 0.0),
+                            ("max_latency_s", max_latency_s, 0.0), ("max_range_m", max_range_m, 0.05),
+                            ("min_range_m", min_range_m, 0.0), ("caution_ttc_s", caution_ttc_s, 0.0),
+                            ("caution_m", caution_m, 0.0), ("stop_m", stop_m, 0.0), ("hysteresis_m", hysteresis_m, 0.0),
+                            ("approach_m", approach_m, 0.0), ("miss_m", miss_m, 0.0), ("threshold", threshold, 1.0)):
+            check_number(v, name, lo=lo)
+        if not min_range_m < max_range_m:
+            raise VrechoError(f"min_range_m: must be below max_range_m ({max_range_m} m), got {min_range_m}")
+        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
+            raise VrechoError(f"seed: expected a whole number of at least 0, got {seed!r}")
         probes = probe_codes(fs)
         m = len(probes[0])
         least = 2 * max_range_m / SPEED_OF_SOUND + (m + 2 * GUARD) / fs + dither_s + 0.001
@@ -282,7 +297,15 @@ class BoundaryMonitor:
             The stream's timestamps (unused: the monitor finds its round trip itself).
         status : sounddevice.CallbackFlags
             True when the stream lost or invented samples.
+
+        Raises
+        ------
+        VrechoError
+            For ``frames`` other than the blocks' length, or blocks :meth:`process` refuses.
         """
+        length = np.shape(indata)[0] if np.ndim(indata) else None
+        if isinstance(frames, bool) or not isinstance(frames, (int, np.integer)) or frames != length:
+            raise VrechoError(f"frames: expected the microphone block's length, {length}, got {frames!r}")
         if status:
             self._lock.suspect()
         self.process(indata, outdata)
@@ -293,11 +316,13 @@ class BoundaryMonitor:
         Parameters
         ----------
         mic : numpy.ndarray [shape=(frames,) or (frames, channels)]
-            Samples in [-1, 1] (channel 0 is used); any block size, changing from call to call.
+            Samples in [-1, 1], or PCM integers (int32, int16, int8, uint8: their full scale);
+            channel 0 is used; any block size, changing from call to call. NaN or infinite
+            samples are flagged ("nan") and not listened to.
         speaker : numpy.ndarray [shape=(frames,) or (frames, channels)], optional
-            A writable array of the same number of frames, filled in place (every channel gets
-            the probe); None when the probe is played some other way (:meth:`speaker_block`
-            gives the samples).
+            A writable array of the same number of frames, floats or PCM integers, filled in
+            place (every channel gets the probe, scaled to the integers' full scale); None when
+            the probe is played some other way (:meth:`speaker_block` gives the samples).
 
         Returns
         -------
@@ -307,21 +332,30 @@ class BoundaryMonitor:
         Raises
         ------
         VrechoError
-            For a ``mic`` block that is not numeric (frames,) or (frames, channels), or a
-            ``speaker`` block of another length.
+            For a ``mic`` or ``speaker`` block that is not (frames,) or (frames, channels) of
+            floats or integers (bool, complex, no channel), a ``speaker`` block of another
+            length, not a NumPy array or read-only; checked before anything is written or
+            heard.
         """
-        x = np.asarray(mic)
-        if x.ndim == 2:
-            x = x[:, 0]
-        if x.ndim != 1 or x.dtype.kind not in "fiu":
-            raise VrechoError(f"mic: expected a numeric (frames,) or (frames, channels) block, got shape {x.shape}")
+        x = channel0(np.asarray(mic), "mic")
         n = len(x)
         if speaker is not None:
-            out = np.asarray(speaker)
-            if len(out) != n:
-                raise VrechoError(f"speaker: expected {n} frames like the microphone block, got {len(out)}")
+            if not isinstance(speaker, np.ndarray):
+                raise VrechoError(f"speaker: expected a NumPy array to fill in place, got {type(speaker).__name__}")
+            channel0(speaker, "speaker")
+            if len(speaker) != n:
+                raise VrechoError(f"speaker: expected {n} frames like the microphone block, got {len(speaker)}")
+            if not speaker.flags.writeable:
+                raise VrechoError("speaker: the block is read-only; the monitor writes its probe into it")
             block = self.speaker_block(n)
-            out[...] = block[:, None] if out.ndim == 2 else block
+            if speaker.dtype.kind != "f":  # PCM: the probe (peak under 1) scaled to the integers' full scale
+                offset, scale = pcm_scale(speaker.dtype)
+                info = np.iinfo(speaker.dtype)
+                block = np.clip(np.round(offset + scale * block), info.min, info.max)
+            speaker[...] = block[:, None] if speaker.ndim == 2 else block
+        if x.dtype.kind != "f":
+            offset, scale = pcm_scale(x.dtype)
+            x = (x.astype(np.float32) - offset) / scale
         self._written += n
         staged = self._staged
         if staged + n < _STAGE:  # small blocks wait for a few milliseconds' worth (the work is per block)

@@ -530,3 +530,47 @@ def clipped(x: np.ndarray) -> bool:
     if np.count_nonzero(top) < 3:  # the usual block: one loudest sample
         return False
     return bool(np.any(top[2:] & top[1:-1] & top[:-2]))
+
+
+def channel0(a: np.ndarray, name: str) -> np.ndarray:
+    """Channel 0 of an audio block (frames,) or (frames, channels) of floats or PCM integers.
+
+    Parameters
+    ----------
+    a : numpy.ndarray
+        The block.
+    name : str
+        Its name, which errors give ("mic", "speaker").
+
+    Returns
+    -------
+    numpy.ndarray [shape=(frames,)]
+        A view of channel 0, of ``a``'s dtype.
+
+    Raises
+    ------
+    VrechoError
+        Naming ``name``, for another shape (0-d, no channel, more dimensions) or dtype (bool,
+        complex, strings, objects).
+    """
+    if a.ndim not in (1, 2) or (a.ndim == 2 and a.shape[1] == 0) or a.dtype.kind not in "fiu":
+        raise VrechoError(f"{name}: expected a block (frames,) or (frames, channels) of floats or PCM integers "
+                          f"(sounddevice's float32, int32, int16, int8, uint8), got shape {a.shape} ({a.dtype})")
+    return a[:, 0] if a.ndim == 2 else a
+
+
+def pcm_scale(dtype: np.dtype) -> tuple[float, float]:
+    """The zero and the full scale of integer samples, ``x = zero + scale * value`` for a value
+    in [-1, 1] (PCM: uint8 centred on 128).
+
+    Parameters
+    ----------
+    dtype : numpy.dtype
+        An integer dtype.
+
+    Returns
+    -------
+    zero, scale : float
+    """
+    info = np.iinfo(dtype)
+    return (0.0, -float(info.min)) if info.min < 0 else ((info.max + 1) / 2, (info.max + 1) / 2)
