@@ -411,3 +411,73 @@ def _read_obj(data: bytes, path: Path):
     v = np.array(vertices, np.float64).reshape(-1, 3)
     c = np.clip(np.nan_to_num(np.array(colours, np.float64)), 0, 1) if colours and None not in colours else None
     return v, _fans(counts, np.array(flat, np.int64), path), c
+
+
+MAX_ARRAY_BYTES = 1 << 32
+"""Largest array read from a user's ``.npz`` file (4 GiB), checked from its header before it is
+read."""
+
+
+def read_arrays(path: str | Path, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict:
+    """Named arrays of a NumPy ``.npz`` file, read without pickles; one error if it is not one.
+
+    Each array's header is read first: object arrays (pickles) and arrays over
+    :data:`MAX_ARRAY_BYTES` are refused before their data is read.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The ``.npz`` file (``numpy.savez`` or ``numpy.savez_compressed``).
+    required : tuple of str
+        The arrays it must hold.
+    optional : tuple of str
+        Arrays read where present.
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        The arrays found, by name; other arrays in the file are not read.
+
+    Raises
+    ------
+    VrechoError
+        Naming the file and array, if the file cannot be read, is not an ``.npz`` (a zip of
+        ``.npy`` files), lacks a required array, or holds one that is an object array, is
+        larger than :data:`MAX_ARRAY_BYTES`, or is truncated or damaged.
+    """
+    import zipfile
+    import zlib
+
+    path = Path(path)
+    fmt = np.lib.format
+    try:
+        with open(path, "rb") as f:
+            if f.read(4) != b"PK\x03\x04":
+                raise VrechoError(f"{path}: not an .npz file (numpy.savez's zip of arrays)")
+        with zipfile.ZipFile(path) as z:
+            names = set(z.namelist())
+            missing = [k for k in required if k + ".npy" not in names]
+            if missing:
+                raise VrechoError(f"{path}: lacks {missing}")
+            out = {}
+            for key in [k for k in required + optional if k + ".npy" in names]:
+                with z.open(key + ".npy") as member:
+                    version = fmt.read_magic(member)
+                    if version not in ((1, 0), (2, 0)):
+                        raise ValueError(f"npy format version {version}")
+                    read_header = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+                    shape, _, dtype = read_header(member)
+                    if dtype.hasobject:
+                        raise VrechoError(f"{path}: {key} holds Python objects (a pickle); expected numbers")
+                    if dtype.itemsize * float(np.prod(shape)) > MAX_ARRAY_BYTES:
+                        raise VrechoError(f"{path}: {key} is {shape}, over {MAX_ARRAY_BYTES >> 30} GiB")
+                with z.open(key + ".npy") as member:
+                    out[key] = fmt.read_array(member, allow_pickle=False)
+    except VrechoError:
+        raise
+    except OSError as e:  # zipfile.BadZipFile is not one
+        raise VrechoError(f"{path}: cannot read it ({e.strerror or e})") from None
+    except (ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError, RuntimeError) as e:
+        raise VrechoError(f"{path}: truncated or damaged ({type(e).__name__}: {str(e)[:80]}); expected numpy.savez's "
+                          ".npz") from None
+    return out
