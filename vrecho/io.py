@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import os
 import tempfile
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -445,9 +447,6 @@ def read_arrays(path: str | Path, required: tuple[str, ...], optional: tuple[str
         ``.npy`` files), lacks a required array, or holds one that is an object array, is
         larger than :data:`MAX_ARRAY_BYTES`, or is truncated or damaged.
     """
-    import zipfile
-    import zlib
-
     path = Path(path)
     fmt = np.lib.format
     try:
