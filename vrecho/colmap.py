@@ -30,9 +30,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .errors import VrechoError
+from .io import MAX_COORDINATE_M
 
 PINHOLE_PARAMS = {"SIMPLE_PINHOLE": 3, "PINHOLE": 4, "SIMPLE_RADIAL": 4, "RADIAL": 5, "OPENCV": 8}
 """The camera models vrecho reads, with their number of parameters."""
+MAX_IMAGE_SIDE = 100_000
+"""Largest width or height of a camera's pictures, in pixels."""
 
 
 @dataclass
@@ -84,11 +87,46 @@ class Image:
     pose: np.ndarray
 
 
-def _lines(path: Path) -> list[str]:
+MAX_MODEL_BYTES = 1 << 28
+"""Largest ``cameras.txt`` or ``images.txt`` read (256 MiB: some 500 000 images' points)."""
+
+
+def _lines(path: Path) -> list[tuple[int, str]]:
+    """The lines of a model's text file, numbered from 1, stripped, comments left out."""
     if not path.is_file():
         raise VrechoError(f"poses: {path.parent} has no {path.name} (expected COLMAP's text model: cameras.txt and "
                           "images.txt; convert a binary model with `colmap model_converter --output_type TXT`)")
-    return [line.strip() for line in path.read_text().splitlines() if not line.startswith("#")]
+    try:
+        if path.stat().st_size > MAX_MODEL_BYTES:
+            raise VrechoError(f"poses: {path} is larger than {MAX_MODEL_BYTES >> 20} MiB; expected COLMAP's text model")
+        data = path.read_bytes()
+        text = data.decode("utf-8")
+    except OSError as e:
+        raise VrechoError(f"poses: {path}: cannot read it ({e.strerror or e})") from None
+    except UnicodeDecodeError as e:
+        line = data[:e.start].count(b"\n") + 1
+        raise VrechoError(f"poses: {path}: line {line} is not text (UTF-8); expected COLMAP's text model (convert a "
+                          "binary one with `colmap model_converter --output_type TXT`)") from None
+    return [(n, line.strip()) for n, line in enumerate(text.split("\n"), start=1)
+            if not line.lstrip().startswith("#")]
+
+
+def _whole(token: str, where: str) -> int:
+    """A COLMAP id or size: a whole number written in at most 10 ASCII digits."""
+    if not (token.isascii() and token.isdigit() and len(token) <= 10):
+        raise VrechoError(f"{where}: expected a whole number, got {token[:40]!r}")
+    return int(token)
+
+
+def _numbers(tokens: list[str], where: str) -> np.ndarray:
+    """Finite numbers written as text (Python's float syntax less its infinities and NaN)."""
+    try:
+        x = np.array([float(t) for t in tokens])
+    except ValueError:
+        raise VrechoError(f"{where}: expected numbers, got {' '.join(tokens)[:80]!r}") from None
+    if not np.all(np.isfinite(x)):
+        raise VrechoError(f"{where}: expected finite numbers, got {' '.join(tokens)[:80]!r}")
+    return x
 
 
 def quaternion_matrix(q) -> np.ndarray:
@@ -111,7 +149,9 @@ def quaternion_matrix(q) -> np.ndarray:
            [0., 1., 0.],
            [0., 0., 1.]])
     """
-    w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
+    q = np.asarray(q, float)
+    q = q / np.abs(q).max()  # first to the largest: a norm of huge numbers overflows
+    w, x, y, z = q / np.linalg.norm(q)
     return Rotation.from_quat([x, y, z, w]).as_matrix()
 
 
@@ -120,7 +160,8 @@ def read_model(folder: str | Path) -> tuple[dict[int, Camera], list[Image]]:
     images in the file's order.
 
     Lines starting with ``#`` are comments; in ``images.txt`` only lines of exactly ten fields
-    are read as image headers (points lines are skipped).
+    are read as image headers, and lines of a multiple of three (an image's 2-D points, or
+    none) are skipped unread.
 
     Parameters
     ----------
@@ -137,46 +178,67 @@ def read_model(folder: str | Path) -> tuple[dict[int, Camera], list[Image]]:
     Raises
     ------
     VrechoError
-        For a missing file, a malformed line, an unsupported camera model (or a wrong number of
-        its parameters), an image of an unknown camera, an image without a valid pose, or an
+        Naming the file and line: for a missing or unreadable file (not UTF-8 text, or over
+        :data:`MAX_MODEL_BYTES`), a malformed line (a field that is not a whole number where an
+        id or size is due, or not a finite number), an unsupported camera model (or a wrong
+        number of its parameters), a camera's size outside 1 to :data:`MAX_IMAGE_SIDE` pixels or
+        a focal length not positive, a camera id or an image id or name given twice, an image of
+        an unknown camera, an image name with control characters, an image without a valid pose
+        (a zero quaternion, a translation beyond :data:`vrecho.io.MAX_COORDINATE_M`), or an
         ``images.txt`` with no image.
     """
     folder = Path(folder)
     cameras = {}
-    for line in _lines(folder / "cameras.txt"):
+    for n, line in _lines(folder / "cameras.txt"):
         if not line:
             continue
-        t = line.split()
-        try:
-            cid, model, width, height, params = int(t[0]), t[1], int(t[2]), int(t[3]), np.array(t[4:], float)
-        except (IndexError, ValueError):
-            raise VrechoError(f"poses: cameras.txt: cannot read {line!r}; expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS")
+        where, t = f"poses: {folder / 'cameras.txt'}, line {n}", line.split()
+        if len(t) < 5:
+            raise VrechoError(f"{where}: cannot read {line[:80]!r}; expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS")
+        cid, model = _whole(t[0], f"{where}, CAMERA_ID"), t[1]
+        width, height = _whole(t[2], f"{where}, WIDTH"), _whole(t[3], f"{where}, HEIGHT")
         if model not in PINHOLE_PARAMS:
-            raise VrechoError(f"poses: camera {cid} is {model}; vrecho reads {', '.join(PINHOLE_PARAMS)} "
+            raise VrechoError(f"{where}: camera {cid} is {model[:40]}; vrecho reads {', '.join(PINHOLE_PARAMS)} "
                               "(undistort fisheye pictures with `colmap image_undistorter` first)")
+        params = _numbers(t[4:], f"{where}, PARAMS")
         if len(params) != PINHOLE_PARAMS[model]:
-            raise VrechoError(f"poses: camera {cid} ({model}) has {len(params)} parameters, expected "
+            raise VrechoError(f"{where}: camera {cid} ({model}) has {len(params)} parameters, expected "
                               f"{PINHOLE_PARAMS[model]}")
-        cameras[cid] = Camera(model, width, height, params)
-    images = []
+        if cid in cameras:
+            raise VrechoError(f"{where}: camera {cid} again (each CAMERA_ID once)")
+        if not (1 <= width <= MAX_IMAGE_SIDE and 1 <= height <= MAX_IMAGE_SIDE):
+            raise VrechoError(f"{where}: camera {cid} is {width} x {height} pixels; expected 1 to {MAX_IMAGE_SIDE}")
+        cam = Camera(model, width, height, params)
+        if not np.all(np.diag(cam.intrinsics)[:2] > 0):
+            raise VrechoError(f"{where}: camera {cid}'s focal length must be positive (pixels), got "
+                              f"{np.diag(cam.intrinsics)[:2].tolist()}")
+        cameras[cid] = cam
+    images, ids, names = [], set(), set()
     # An image's header has exactly ten fields; its points line has a multiple of three (or none).
-    for line in _lines(folder / "images.txt"):
-        t = line.split()
+    for n, line in _lines(folder / "images.txt"):
+        where, t = f"poses: {folder / 'images.txt'}, line {n}", line.split()
         if len(t) != 10:
+            if len(t) % 3:
+                raise VrechoError(f"{where}: cannot read {line[:80]!r}; expected IMAGE_ID QW QX QY QZ TX TY TZ "
+                                  "CAMERA_ID NAME, or the image's 2-D points (X Y POINT3D_ID ...)")
             continue
-        try:
-            q, tr, cid = np.array(t[1:5], float), np.array(t[5:8], float), int(t[8])
-        except ValueError:
-            raise VrechoError(f"poses: images.txt: cannot read {line!r}; expected IMAGE_ID QW QX QY QZ TX TY TZ "
-                              "CAMERA_ID NAME")
+        iid, cid, name = _whole(t[0], f"{where}, IMAGE_ID"), _whole(t[8], f"{where}, CAMERA_ID"), t[9]
+        q, tr = _numbers(t[1:5], f"{where}, QW QX QY QZ"), _numbers(t[5:8], f"{where}, TX TY TZ")
         if cid not in cameras:
-            raise VrechoError(f"poses: image {t[9]} names camera {cid}, which cameras.txt lacks")
-        if not np.all(np.isfinite(np.r_[q, tr])) or np.linalg.norm(q) < 1e-9:
-            raise VrechoError(f"poses: image {t[9]} has no valid pose ({' '.join(t[1:8])})")
+            raise VrechoError(f"{where}: image {name[:80]} names camera {cid}, which cameras.txt lacks")
+        if iid in ids or name in names:
+            raise VrechoError(f"{where}: image {iid} ({name[:80]}) again (each IMAGE_ID and NAME once)")
+        if not name.isprintable():
+            raise VrechoError(f"{where}: image {iid}'s name {name[:80]!r} holds control characters")
+        if not np.any(q) or np.abs(tr).max() > MAX_COORDINATE_M:
+            raise VrechoError(f"poses: image {name} has no valid pose ({' '.join(t[1:8])}); expected a non-zero "
+                              f"quaternion and a translation within {MAX_COORDINATE_M:g} m ({where})")
         r = quaternion_matrix(q)
         pose = np.eye(4)
         pose[:3, :3], pose[:3, 3] = r.T, -r.T @ tr
-        images.append(Image(t[9], cid, pose))
+        images.append(Image(name, cid, pose))
+        ids.add(iid)
+        names.add(name)
     if not images:
         raise VrechoError(f"poses: {folder / 'images.txt'} holds no image")
     return cameras, images
@@ -249,7 +311,7 @@ def image_times(names: list[str], fps: float, *, first: int = 1) -> np.ndarray:
     names : list of str
         The pictures' file names.
     fps : float
-        Pictures per second of video; positive.
+        Pictures per second of video; above 0, at most 1000.
     first : int
         Number of the first picture; 1 by default.
 
@@ -261,19 +323,20 @@ def image_times(names: list[str], fps: float, *, first: int = 1) -> np.ndarray:
     Raises
     ------
     VrechoError
-        If ``fps`` is not positive, or a name holds no number.
+        If ``fps`` is not a number above 0 and at most 1000, or a name holds no number (of at
+        most 12 digits).
 
     Examples
     --------
     >>> image_times(["images/000001.png", "images/000004.png"], 2.0)
     array([0. , 1.5])
     """
-    if not fps > 0:
-        raise VrechoError(f"image-fps: expected a positive rate, got {fps}")
+    if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)) or not 0 < fps <= 1000:
+        raise VrechoError(f"image-fps: expected a rate above 0 and at most 1000 pictures per second, got {fps!r}")
     out = []
     for name in names:
-        m = re.findall(r"\d+", Path(name).stem)
-        if not m:
+        m = re.findall(r"[0-9]+", Path(name).stem)
+        if not m or len(m[-1]) > 12:
             raise VrechoError(f"poses: image {name!r} has no frame number in its name; expected pictures numbered "
                               "as ffmpeg writes them (images/%06d.png)")
         out.append((int(m[-1]) - first) / fps)

@@ -38,14 +38,16 @@ def read_video(path) -> tuple[np.ndarray, int, np.ndarray]:
     Raises
     ------
     VrechoError
-        One error for a file that is not a video, a codec FFmpeg cannot decode, or a video
-        without sound (no audio track, or one holding no samples).
+        One error for a file that is not a video, a codec FFmpeg cannot decode, a video without
+        sound (no audio track, or one holding no samples), a sound with samples not finite, or a
+        file whose sound or pictures decode for less than its header's length, by more than
+        0.5 s and 2 % (and two pictures' interval): truncated or damaged.
     """
     import av  # FFmpeg's libraries: only when a video is read or written
 
     path = str(path)
     try:
-        with av.open(path) as container:
+        with av.open(path, metadata_errors="replace") as container:  # tags need not be UTF-8
             if not container.streams.audio:
                 raise VrechoError(f"{path}: the video has no audio track; vrecho needs the microphone's recording "
                                   "of its pulses (or give --audio WAV)")
@@ -69,13 +71,26 @@ def read_video(path) -> tuple[np.ndarray, int, np.ndarray]:
                     if np.issubdtype(raw.dtype, np.integer):
                         a /= float(np.iinfo(raw.dtype).max)
                     chunks.append(a)
-            fs = int(astream.rate)
+            fs = int(astream.rate or 0)
+            declared = container.duration / av.time_base if container.duration else None
     except av.FFmpegError as e:
         raise VrechoError(f"{path}: cannot decode it ({e}); expected a video FFmpeg reads (MP4/MOV/MKV with "
                           "H.264/HEVC and AAC/PCM/FLAC sound)") from None
-    if not chunks:
+    if not chunks or fs <= 0:
         raise VrechoError(f"{path}: the audio track holds no samples")
-    return np.concatenate(chunks), fs, np.array(sorted(times)) - (a0 or 0.0)
+    audio = np.concatenate(chunks)
+    # A truncated or damaged file decodes in part, without an error from FFmpeg: measured against
+    # the length its header says, a part short by over 0.5 s and 2 % (and two pictures) is refused.
+    times = sorted(times)
+    gap = float(np.median(np.diff(times))) if len(times) > 1 else 0.0
+    spans = {"sound": (audio.size / fs, 0.0), "pictures": (times[-1] - times[0] if times else None, 2 * gap)}
+    for what, (span, slack) in spans.items():
+        if declared and span is not None and span < declared - 0.5 - 0.02 * declared - slack:
+            raise VrechoError(f"{path}: its {what}: {span:.1f} s decoded of the {declared:.1f} s its header says; "
+                              "the file is truncated or damaged (expected the whole video)")
+    if not np.all(np.isfinite(audio)):
+        raise VrechoError(f"{path}: its sound holds samples that are not finite numbers")
+    return audio, fs, np.array(times) - (a0 or 0.0)
 
 
 def video_images(path, times_s, *, width: int | None = None) -> np.ndarray:
@@ -101,13 +116,14 @@ def video_images(path, times_s, *, width: int | None = None) -> np.ndarray:
     Raises
     ------
     VrechoError
-        For a file FFmpeg cannot decode, or one without pictures.
+        For a file FFmpeg cannot decode, one without pictures, or one none of whose pictures
+        decodes.
     """
     import av  # FFmpeg's libraries: only when a video is read or written
 
     times_s = np.asarray(times_s, float)
     try:
-        return _pictures(av.open(str(path)), times_s, width)
+        return _pictures(av.open(str(path), metadata_errors="replace"), times_s, width)
     except av.FFmpegError as e:
         raise VrechoError(f"{path}: cannot decode its pictures ({e}); expected H.264 or HEVC video") from None
 
@@ -134,6 +150,8 @@ def _pictures(container, times_s: np.ndarray, width: int | None) -> np.ndarray:
             if k == len(order):
                 break
             last = frame  # converted only if a time falls in it
+    if last is None and k < len(order):
+        raise VrechoError(f"{container.name}: none of its pictures decodes; the file is truncated or damaged")
     for j in order[k:]:
         out[j] = last.to_ndarray(format="gray", **size)
     return np.stack(out)
@@ -212,12 +230,15 @@ def read_audio(path) -> tuple[np.ndarray, int]:
     Raises
     ------
     VrechoError
-        For a file libsndfile cannot read as sound.
+        For a file libsndfile cannot read as sound, or one with no samples or samples not
+        finite.
     """
     try:
         x, fs = sf.read(str(path), dtype="float32", always_2d=True)
     except (sf.LibsndfileError, RuntimeError) as e:
         raise VrechoError(f"{path}: cannot read it as sound ({e}); expected WAV or FLAC") from None
+    if not x.size or not np.all(np.isfinite(x)):
+        raise VrechoError(f"{path}: {'holds no samples' if not x.size else 'holds samples that are not finite numbers'}")
     return x.mean(axis=1), int(fs)
 
 
@@ -257,6 +278,48 @@ def image_files(folder: Path, names: list[str] | None) -> list[Path]:
     return files
 
 
+def _open_picture(f: Path) -> Image.Image:
+    """A picture file opened (its header read), or one error naming it."""
+    try:
+        return Image.open(f)
+    except (OSError, ValueError, Image.DecompressionBombError) as e:
+        raise VrechoError(f"images: {f}: cannot read it as a picture ({e}); expected PNG or JPEG") from None
+
+
+def check_pictures(files: list[Path]) -> tuple[int, int]:
+    """The common size of picture files, from their headers (fast: nothing decoded).
+
+    Parameters
+    ----------
+    files : list of pathlib.Path
+        The pictures (:func:`image_files`).
+
+    Returns
+    -------
+    width, height : int
+        Their size in pixels.
+
+    Raises
+    ------
+    VrechoError
+        Naming the file, for one that is not a picture PIL reads (or is over its 179-million-
+        pixel guard), one of another size than the first, or pictures more than 10 times as wide
+        as high (or the reverse).
+    """
+    sizes = []
+    for f in files:
+        with _open_picture(f) as im:
+            sizes.append(im.size)
+        if sizes[-1] != sizes[0]:
+            raise VrechoError(f"images: {f} is {sizes[-1][0]} x {sizes[-1][1]} pixels, {files[0].name} "
+                              f"{sizes[0][0]} x {sizes[0][1]}; expected the pictures of one video")
+    w, h = sizes[0]
+    if not w / 10 <= h <= 10 * w:
+        raise VrechoError(f"images: the pictures are {w} x {h} pixels; expected a video's (at most 10 times as high as "
+                          "wide, and 10 times as wide as high)")
+    return w, h
+
+
 def load_pictures(files: list[Path], width: int | None) -> np.ndarray:
     """Picture files read as grayscale.
 
@@ -271,11 +334,23 @@ def load_pictures(files: list[Path], width: int | None) -> np.ndarray:
     -------
     numpy.ndarray [shape=(K, H, W)], uint8
         One picture per file, in order.
+
+    Raises
+    ------
+    VrechoError
+        Naming the file, for one that does not decode (truncated or damaged) or is not of the
+        first one's size (:func:`check_pictures` checks the headers beforehand).
     """
     out = []
     for f in files:
-        im = Image.open(f).convert("L")
+        with _open_picture(f) as im:
+            try:
+                im = im.convert("L")
+            except (OSError, ValueError, Image.DecompressionBombError) as e:
+                raise VrechoError(f"images: {f}: cannot decode it ({e}); the file is truncated or damaged") from None
         if width is not None:
-            im = im.resize((width, int(round(im.height * width / im.width))), Image.BILINEAR)
+            im = im.resize((width, max(1, int(round(im.height * width / im.width)))), Image.BILINEAR)
         out.append(np.asarray(im, np.uint8))
+        if out[-1].shape != out[0].shape:
+            raise VrechoError(f"images: {f} is not of {files[0].name}'s size; expected the pictures of one video")
     return np.stack(out)

@@ -14,11 +14,11 @@ import numpy as np
 
 from ..camera import crop_view
 from ..colmap import image_times
-from ..errors import VrechoError
+from ..errors import VrechoError, check_number
 from ..io import read_mesh
 from ..reconstruct import LABELS, Reconstruction, facing, reconstruct
 from ..signals import FS, probe
-from .media import image_files, load_pictures, read_audio, read_video, video_images
+from .media import check_pictures, image_files, load_pictures, read_audio, read_video, video_images
 from .onsets import Onsets, cut_frames, find_onsets, frame_flags
 from .posing import VIEW_WIDTH, Poses, posed_scan, read_poses
 
@@ -132,7 +132,8 @@ def open_capture(video=None, audio=None, images=None, poses=None, mesh=None, *, 
         without ``image_fps``; ``poses`` without pictures), an unknown ``labels``, an
         ``emitter_distance_m`` outside 0 to 3 m, and for any file that cannot be read or does
         not match the recording (:func:`~.media.read_video`, :func:`~.media.read_audio`,
-        :func:`~.posing.read_poses`, :func:`vrecho.io.read_mesh`, :func:`~.media.image_files`).
+        :func:`~.posing.read_poses`, :func:`vrecho.io.read_mesh`, :func:`~.media.image_files`,
+        :func:`~.media.check_pictures`).
     """
     if (video is None) == (audio is None):
         raise VrechoError("capture: give a video, or --audio with a sound file (not both)")
@@ -144,11 +145,10 @@ def open_capture(video=None, audio=None, images=None, poses=None, mesh=None, *, 
         raise VrechoError("capture: --poses and --images need --image-fps, the rate the pictures were extracted at")
     if poses is not None and video is None and images is None:
         raise VrechoError("capture: --poses needs the pictures: a video, or --audio with --images")
-    if labels not in LABELS:
+    if not isinstance(labels, str) or labels not in LABELS:
         raise VrechoError(f"labels: expected one of {tuple(LABELS)}, got {labels!r}")
-    if emitter_distance_m is not None and not 0 <= emitter_distance_m <= 3:
-        raise VrechoError(f"emitter-distance: expected 0 to 3 m from the loudspeaker to the microphone, "
-                          f"got {emitter_distance_m}")
+    if emitter_distance_m is not None:
+        check_number(emitter_distance_m, "emitter-distance (m from the loudspeaker to the microphone)", lo=0, hi=3)
     if audio is not None:
         x, fs = read_audio(audio)
         video_start = 0.0
@@ -160,6 +160,10 @@ def open_capture(video=None, audio=None, images=None, poses=None, mesh=None, *, 
         posed = read_poses(poses, image_fps, x.size / fs, video_start_s=video_start)
         user_mesh = read_mesh(mesh).transform(posed.to_z_up)
     files = image_files(Path(images), None if posed is None else posed.names) if images is not None else None
+    if files is not None:
+        check_pictures(files)
+        if posed is None:  # the pictures' times come from their names
+            image_times([f.name for f in files], image_fps)
     return Recording(x, fs, None if video is None else Path(video), video_start, files, image_fps, posed, user_mesh,
                      labels, emitter_distance_m)
 

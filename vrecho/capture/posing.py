@@ -159,8 +159,9 @@ def read_poses(folder, image_fps: float, duration_s: float, *, video_start_s: fl
     Raises
     ------
     VrechoError
-        For a model :func:`vrecho.colmap.read_model` cannot read, a non-positive ``image_fps``
-        or a picture name without a number; when the pictures use more than one camera, lie
+        For a model :func:`vrecho.colmap.read_model` cannot read, an ``image_fps`` that is not
+        above 0 and at most 1000, or a picture name without a number; for a camera more than 10
+        times as wide as high (or the reverse); when the pictures use more than one camera, lie
         outside the recording, or the cameras' up axes point neither along the world's z nor
         its y.
     """
@@ -170,6 +171,10 @@ def read_poses(folder, image_fps: float, duration_s: float, *, video_start_s: fl
         raise VrechoError(f"poses: the images use {len(used)} different cameras; expected the one camera of a video "
                           "(COLMAP: --ImageReader.single_camera 1)")
     K, w, h = view_intrinsics(cameras[images[0].camera_id])
+    if not w / 10 <= h <= 10 * w:
+        raise VrechoError(f"poses: the camera's pictures are {cameras[images[0].camera_id].width} x "
+                          f"{cameras[images[0].camera_id].height} pixels; expected a video's (at most 10 times as "
+                          "high as wide, and 10 times as wide as high)")
     names = [im.name for im in images]
     times = colmap.image_times(names, image_fps) + video_start_s
     if times.max() > duration_s + 1.0 or times.min() < -1.0:

@@ -15,8 +15,8 @@ import numpy as np
 from tqdm import tqdm
 
 from ..camera import DEPTH_MAX_M, View
-from ..errors import VrechoError
-from ..io import ensure_writable_dir, read_mesh, write_mesh
+from ..errors import VrechoError, check_number
+from ..io import MAX_COORDINATE_M, ensure_writable_dir, read_arrays, read_mesh, write_mesh
 
 
 @dataclass
@@ -243,39 +243,68 @@ def load_scan(folder: str | Path, *, voxel_m: float = 0.03, progress: bool = Fal
     Raises
     ------
     VrechoError
-        When ``frames.npz`` is missing, lacks one of its arrays, or holds arrays of the wrong
-        shapes; when depth is not finite and non-negative or a pose not finite; when
-        ``echoes.npz`` lacks an array or names frames outside the scan; when ``mesh.ply`` holds
-        no triangles; and when fusion finds no depth reading in range.
+        Naming the file: when ``frames.npz`` is missing, or it or ``echoes.npz`` cannot be read
+        (:func:`vrecho.io.read_arrays`: not an ``.npz``, truncated, an array missing, pickled
+        or over 4 GiB) or holds arrays that are not numbers or of the wrong shapes; when depth
+        is not finite and non-negative, float gray outside 0 to 1, the intrinsics not a pinhole
+        matrix, a pose not a rigid motion within :data:`vrecho.io.MAX_COORDINATE_M`; when
+        ``echoes.npz``'s frames are not whole numbers naming the scan's frames, its ``fs`` not a
+        whole number of 1 Hz to 1 MHz, or its sounds not finite; when ``mesh.ply`` is not a mesh
+        :func:`vrecho.io.read_mesh` takes; and when fusion finds no depth reading in range.
     """
     folder = Path(folder)
     path = folder / "frames.npz"
     if not path.is_file():
         raise VrechoError(f"scan: {folder} has no frames.npz (see vrecho.reconstruct.load_scan for the format)")
-    with np.load(path) as f:
-        missing = {"depth", "gray", "pose", "intrinsics"} - set(f.files)
-        if missing:
-            raise VrechoError(f"scan: {path} lacks {sorted(missing)}")
-        depth, gray, pose, K = (np.asarray(f[k]) for k in ("depth", "gray", "pose", "intrinsics"))
-    if depth.ndim != 3 or gray.shape != depth.shape or pose.shape != (len(depth), 4, 4) or K.shape != (3, 3):
+    names = ("depth", "gray", "pose", "intrinsics")
+    f = read_arrays(path, names)
+    depth, gray, pose, K = (_numbers(path, k, f[k]) for k in names)
+    if depth.ndim != 3 or 0 in depth.shape or gray.shape != depth.shape or pose.shape != (len(depth), 4, 4) \
+            or K.shape != (3, 3):
         raise VrechoError(f"scan: {path}: expected depth and gray (N, H, W), pose (N, 4, 4), intrinsics (3, 3); got "
                           f"{depth.shape}, {gray.shape}, {pose.shape}, {K.shape}")
     if not (np.all(np.isfinite(depth)) and np.all(np.isfinite(pose)) and depth.min() >= 0):
         raise VrechoError(f"scan: {path}: depth must be finite and non-negative, poses finite")
+    if gray.dtype != np.uint8 and not (np.all(np.isfinite(gray)) and gray.min() >= 0 and gray.max() <= 1):
+        raise VrechoError(f"scan: {path}: gray must be uint8, or floats in 0 to 1")
+    if not (np.all(np.isfinite(K)) and K[0, 0] > 0 and K[1, 1] > 0 and np.allclose(K[2], [0, 0, 1])):
+        raise VrechoError(f"scan: {path}: intrinsics must be a pinhole matrix (fx, fy > 0, last row 0 0 1), got "
+                          f"{K.tolist()}")
+    r = pose[:, :3, :3]
+    rigid = np.all(np.abs(r.transpose(0, 2, 1) @ r - np.eye(3)) < 1e-3, axis=(1, 2)) & (np.linalg.det(r) > 0) \
+        & np.all(np.abs(pose[:, 3] - [0, 0, 0, 1]) < 1e-6, axis=1) & (np.abs(pose[:, :3, 3]).max(axis=1) <= MAX_COORDINATE_M)
+    if not rigid.all():
+        k = int(np.flatnonzero(~rigid)[0])
+        raise VrechoError(f"scan: {path}: pose {k} is not a camera-to-world rigid motion (a rotation, a position "
+                          f"within {MAX_COORDINATE_M:g} m, last row 0 0 0 1): {np.round(pose[k], 4).tolist()}")
     gray = gray.astype(np.float32) / 255 if gray.dtype == np.uint8 else gray.astype(np.float32)
     views = [View(g, d.astype(np.float32), K.astype(float), p.astype(float)) for g, d, p in zip(gray, depth, pose)]
+    echoes = None
+    path = folder / "echoes.npz"
+    if path.is_file():  # read (and checked) before the mesh, which may take fusion
+        f = {k: _numbers(path, k, a) for k, a in read_arrays(path, ("frame", "audio", "fs", "emitted")).items()}
+        if f["frame"].ndim != 1 or f["frame"].dtype.kind not in "iu" or f["audio"].shape[:1] != f["frame"].shape \
+                or f["audio"].ndim != 2 or not f["audio"].shape[1] or f["emitted"].ndim != 1 or not f["emitted"].size \
+                or f["fs"].shape != () or f["fs"].dtype.kind not in "iu":
+            raise VrechoError(f"scan: {path}: expected frame (K,) whole numbers, audio (K, n), fs a whole number and "
+                              f"emitted (k,); got {f['frame'].shape} {f['frame'].dtype}, {f['audio'].shape}, "
+                              f"{f['fs'].shape} {f['fs'].dtype}, {f['emitted'].shape}")
+        fs = int(check_number(f["fs"][()], f"scan: {path}: fs (Hz)", lo=1, hi=1_000_000))
+        if not (np.all(np.isfinite(f["audio"])) and np.all(np.isfinite(f["emitted"]))):
+            raise VrechoError(f"scan: {path}: audio and emitted must be finite")
+        if f["frame"].min(initial=0) < 0 or f["frame"].max(initial=0) >= len(views):
+            raise VrechoError(f"scan: echoes.npz names frames outside 0..{len(views) - 1}")
+        echoes = Echoes(f["frame"], f["audio"], fs, f["emitted"].astype(float))
     mesh_path = folder / "mesh.ply"
     if mesh_path.is_file():
         mesh = read_mesh(mesh_path)
     else:
         mesh = fuse(views, voxel_m=voxel_m, progress=progress)
-    echoes = None
-    if (folder / "echoes.npz").is_file():
-        with np.load(folder / "echoes.npz") as f:
-            try:
-                echoes = Echoes(f["frame"], f["audio"], int(f["fs"]), np.asarray(f["emitted"], float))
-            except KeyError as e:
-                raise VrechoError(f"scan: {folder / 'echoes.npz'} lacks {e}") from None
-        if echoes.frame.min(initial=0) < 0 or echoes.frame.max(initial=0) >= len(views):
-            raise VrechoError(f"scan: echoes.npz names frames outside 0..{len(views) - 1}")
     return Scan(views, mesh, echoes)
+
+
+def _numbers(path: Path, key: str, a: np.ndarray) -> np.ndarray:
+    """``a`` if it holds real numbers (bool, int, uint or float), else one error naming it."""
+    if a.dtype.kind not in "biuf":
+        raise VrechoError(f"scan: {path}: {key} holds {a.dtype} values; expected numbers")
+    return a
