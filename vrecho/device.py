@@ -162,10 +162,10 @@ class DevicePose:
         """
         check_keys(d, ("emitter", "forward", "up", "target"), where)
         target = check_field(d, "target", where, None)
-        if target is not None and (isinstance(target, bool) or not isinstance(target, int)):
-            raise VrechoError(f"{where}.target: expected a discontinuity index or null, got {target!r}")
         if target is not None:
             check_number(target, f"{where}.target", lo=0)  # its scene checks it names one of its own
+            if not isinstance(target, int):
+                raise VrechoError(f"{where}.target: expected a discontinuity index (a whole number) or null, got {target!r}")
         try:
             return cls(check_vector(check_field(d, "emitter", where), f"{where}.emitter", lo=-REACH_M, hi=REACH_M),
                        check_field(d, "forward", where), check_field(d, "up", where, [0.0, 0.0, 1.0]), target)

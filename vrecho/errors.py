@@ -20,8 +20,15 @@ MAX_JSON_DEPTH = 32
 MAX_JSON_DIGITS = 18
 """The most digits an integer in a JSON file may have (no count or index needs more)."""
 
-_repr = reprlib.Repr()
-_repr.maxstring = _repr.maxother = 40  # a value shown in a message: its start, never megabytes of it
+_reprlib = reprlib.Repr()
+_reprlib.maxstring = _reprlib.maxother = 30
+_reprlib.maxlevel = 3
+
+
+def _show(x) -> str:
+    """A value as a message shows it: its start, never megabytes of it."""
+    s = _reprlib.repr(x)
+    return s if len(s) <= 80 else s[:76] + "...]"
 
 
 class VrechoError(ValueError):
@@ -113,15 +120,15 @@ def check_number(x, where: str, *, lo: float | None = None, hi: float | None = N
     3.0
     """
     if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
-        raise VrechoError(f"{where}: expected a finite number, got {_repr.repr(x)}")
+        raise VrechoError(f"{where}: expected a finite number, got {_show(x)}")
     try:
         v = float(x)
     except OverflowError:  # a Python int beyond float's range
         v = float("inf")
     if not np.isfinite(v):
-        raise VrechoError(f"{where}: expected a finite number, got {_repr.repr(x)}")
+        raise VrechoError(f"{where}: expected a finite number, got {_show(x)}")
     if (lo is not None and v < lo) or (hi is not None and v > hi):
-        raise VrechoError(f"{where}: must be {_range(lo, hi)}, got {_repr.repr(x)}")
+        raise VrechoError(f"{where}: must be {_range(lo, hi)}, got {_show(x)}")
     return v
 
 
@@ -162,7 +169,7 @@ def check_vector(x, where: str, n: int = 3, *, lo: float | None = None, hi: floa
     elif isinstance(x, (list, tuple)) and len(x) == n:
         v, values = None, x
     else:
-        raise VrechoError(f"{where}: expected {n} numbers, got {_repr.repr(x)}")
+        raise VrechoError(f"{where}: expected {n} numbers, got {_show(x)}")
     checked = [check_number(a, f"{where}[{i}]", lo=lo, hi=hi) for i, a in enumerate(values)]
     return v if v is not None else np.array(checked)
 
@@ -198,13 +205,13 @@ def check_text(x, where: str, *, choices=None, max_len: int = 100) -> str:
     'voice'
     """
     if not isinstance(x, str):
-        raise VrechoError(f"{where}: expected a string, got {_repr.repr(x)}")
+        raise VrechoError(f"{where}: expected a string, got {_show(x)}")
     if choices is not None:
         if x not in choices:
-            raise VrechoError(f"{where}: expected one of {tuple(choices)}, got {_repr.repr(x)}")
+            raise VrechoError(f"{where}: expected one of {tuple(choices)}, got {_show(x)}")
         return x
     if not 0 < len(x) <= max_len or not x.isprintable():  # unpaired surrogates are not printable
-        raise VrechoError(f"{where}: expected 1 to {max_len} printable characters, got {_repr.repr(x)}")
+        raise VrechoError(f"{where}: expected 1 to {max_len} printable characters, got {_show(x)}")
     return x
 
 
@@ -237,7 +244,7 @@ def check_list(x, where: str, *, lo: int = 0, hi: int) -> list:
     [[0, 0], [1, 0], [0, 1]]
     """
     if not isinstance(x, (list, tuple)):
-        raise VrechoError(f"{where}: expected a list, got {_repr.repr(x)}")
+        raise VrechoError(f"{where}: expected a list, got {_show(x)}")
     if not lo <= len(x) <= hi:
         count = f"at most {hi}" if lo == 0 else _range(lo, hi).replace("from ", "")
         raise VrechoError(f"{where}: expected {count} items, got {len(x)}")
@@ -266,7 +273,7 @@ def check_keys(d: dict, known, where: str) -> None:
         raise VrechoError(f"{where}: expected an object, got {type(d).__name__}")
     for key in d:
         if key not in known:
-            raise VrechoError(f"{where}: unknown field {_repr.repr(key)}; expected some of {', '.join(known)}")
+            raise VrechoError(f"{where}: unknown field {_show(key)}; expected some of {', '.join(known)}")
 
 
 def read_json(path: str | Path, what: str, *, expect: type | None = None, max_bytes: int = MAX_JSON_BYTES):

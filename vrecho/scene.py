@@ -315,15 +315,15 @@ class Discontinuity:
                        "depth_sensor_sees_through"), where)
         kind = check_text(check_field(d, "kind", where), f"{where}.kind", choices=KINDS)
         wall = check_field(d, "wall", where)
-        if isinstance(wall, bool) or not isinstance(wall, int):
-            raise VrechoError(f"{where}.wall: expected a wall index, got {wall!r}")
         check_number(wall, f"{where}.wall", lo=0, hi=MAX_CORNERS - 1)
+        if not isinstance(wall, int):
+            raise VrechoError(f"{where}.wall: expected a wall index (a whole number), got {wall!r}")
         default_abs = {"open": (1.0,) * 7, "glass": WINDOW_GLASS, "mirror": MIRROR}[kind]
         absorption = check_vector(check_field(d, "absorption", where, default_abs), f"{where}.absorption",
                                   len(BANDS_HZ), lo=0.0, hi=1.0)
         sees = check_field(d, "depth_sensor_sees_through", where, True)
         if not isinstance(sees, bool):
-            raise VrechoError(f"{where}.depth_sensor_sees_through: expected true or false, got {sees!r}")
+            raise VrechoError(f"{where}.depth_sensor_sees_through: expected true or false, got {type(sees).__name__}")
         # Along the wall and up it: Scene.validate then checks the rectangle against its own wall.
         along, up = 2 * ROOM_SIZE_M[1], ROOM_SIZE_M[1]  # no wall is longer than the footprint's diagonal
         return cls(wall,
@@ -643,9 +643,7 @@ class Scene:
         """
         check_keys(d, ("format", "version", "name", "room", *MAX_ITEMS, "camera_path", "mic_array", "emitter_p"), "scene")
         check_text(check_field(d, "format", "scene", "vrecho-scene"), "scene.format", choices=("vrecho-scene",))
-        version = check_field(d, "version", "scene", 1)
-        if isinstance(version, bool) or version != 1:
-            raise VrechoError(f"scene.version: expected 1 (the only version), got {version!r}")
+        check_number(check_field(d, "version", "scene", 1), "scene.version", lo=1, hi=1)  # the only version
         mic = check_text(check_field(d, "mic_array", "scene", "phone"), "scene.mic_array", choices=tuple(MIC_ARRAYS))
 
         def items(key, read):
