@@ -9,7 +9,8 @@ import soundfile as sf
 
 from localization import PlacedSource
 from vrecho.device import REACH_M
-from vrecho.errors import VrechoError, check_field, check_keys, check_list, check_number, check_text, check_vector, read_json
+from vrecho.errors import (VrechoError, check_field, check_keys, check_list, check_number, check_text, check_vector,
+                           read_json)
 from vrecho.signals import FS, emitted_sound, pulse_train
 
 from .stage import LabeledSurface

@@ -165,7 +165,8 @@ class DevicePose:
         if target is not None:
             check_number(target, f"{where}.target", lo=0)  # its scene checks it names one of its own
             if not isinstance(target, int):
-                raise VrechoError(f"{where}.target: expected a discontinuity index (a whole number) or null, got {target!r}")
+                raise VrechoError(f"{where}.target: expected a discontinuity index (a whole number) or null, "
+                                  f"got {target!r}")
         try:
             return cls(check_vector(check_field(d, "emitter", where), f"{where}.emitter", lo=-REACH_M, hi=REACH_M),
                        check_field(d, "forward", where), check_field(d, "up", where, [0.0, 0.0, 1.0]), target)

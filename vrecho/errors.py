@@ -28,7 +28,7 @@ _reprlib.maxlevel = 3
 def _show(x) -> str:
     """A value as a message shows it: its start, never megabytes of it."""
     s = _reprlib.repr(x)
-    return s if len(s) <= 80 else s[:76] + "...]"
+    return s if len(s) <= 80 else s[:77] + "..."
 
 
 class VrechoError(ValueError):
@@ -308,16 +308,15 @@ def read_json(path: str | Path, what: str, *, expect: type | None = None, max_by
     path = Path(path)
     where = f"{what} {path}"
     try:
-        st = os.stat(path)
-        if not stat.S_ISREG(st.st_mode):
-            raise VrechoError(f"{where}: not a regular file")
-        if st.st_size > max_bytes:
-            raise VrechoError(f"{where}: {st.st_size} bytes, larger than the {max_bytes} allowed")
-        with open(path, "rb") as f:
-            data = f.read(max_bytes + 1)
+        regular = stat.S_ISREG(os.stat(path).st_mode)
+        if regular:
+            with open(path, "rb") as f:
+                data = f.read(max_bytes + 1)
     except (OSError, ValueError) as e:  # ValueError: a path with a NUL byte
         raise VrechoError(f"{where}: cannot read ({getattr(e, 'strerror', None) or e})") from None
-    if len(data) > max_bytes:  # grew while read
+    if not regular:
+        raise VrechoError(f"{where}: not a regular file")
+    if len(data) > max_bytes:
         raise VrechoError(f"{where}: larger than the {max_bytes} bytes allowed")
     try:
         text = data.decode("utf-8-sig")

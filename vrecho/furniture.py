@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import VrechoError, check_field, check_keys, check_number, check_text, check_vector
 from .device import REACH_M
+from .errors import check_field, check_keys, check_number, check_text, check_vector
 from .materials import Material
 
 SIZE_M = (0.01, 50.0)

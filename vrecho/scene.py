@@ -96,8 +96,10 @@ class Room:
     Raises
     ------
     VrechoError
-        For fewer than 3 finite corners, a clockwise or self-crossing footprint, a wall shorter
-        than 5 cm, a height not positive, or a wrong number of wall materials.
+        For other than 3 to :data:`MAX_CORNERS` finite corners, a corner beyond
+        :data:`~vrecho.device.REACH_M`, a height or a side of the footprint's bounding box
+        outside :data:`ROOM_SIZE_M`, a clockwise or self-crossing footprint, a wall shorter than
+        5 cm, or a wrong number of wall materials.
     """
 
     footprint: np.ndarray
@@ -122,8 +124,7 @@ class Room:
             raise VrechoError(f"room.footprint: spans {extent[0]:g} x {extent[1]:g} m; each side of its bounding box "
                               f"must be from {lo:g} to {hi:g} m")
         self.height_m = check_number(self.height_m, "room.height_m", lo=lo, hi=hi)
-        if not isinstance(self.walls, (list, tuple)) or len(self.walls) != len(fp):
-            raise VrechoError(f"room.walls: expected one material per wall ({len(fp)}), got {len(self.walls)}")
+        check_list(self.walls, "room.walls (one material per wall)", lo=len(fp), hi=len(fp))
         if np.min(self.wall_lengths) < 0.05:
             raise VrechoError(f"room.footprint: wall {int(np.argmin(self.wall_lengths))} is shorter than 5 cm")
         if signed_area(fp) <= 0:
@@ -215,7 +216,7 @@ class Room:
         corners = check_list(check_field(d, "footprint", where), f"{where}.footprint", lo=3, hi=MAX_CORNERS)
         fp = np.array([check_vector(c, f"{where}.footprint[{i}]", 2, lo=-REACH_M, hi=REACH_M)
                        for i, c in enumerate(corners)])
-        height = check_number(check_field(d, "height_m", where), f"{where}.height_m", lo=ROOM_SIZE_M[0], hi=ROOM_SIZE_M[1])
+        height = check_field(d, "height_m", where)  # checked, with the footprint's extent, by the room itself
         walls = check_field(d, "walls", where)
         if isinstance(walls, (str, dict)):
             walls = [walls] * len(fp)
@@ -441,6 +442,10 @@ class Scene:
         room = self.room
         lo, hi = room.box
         inside = f"the room spans x {lo[0]:g} to {hi[0]:g}, y {lo[1]:g} to {hi[1]:g}, z 0 to {hi[2]:g} m"
+
+        def outside_room(what: str, point) -> VrechoError:
+            return VrechoError(f"{what} {np.round(point, 3).tolist()} is outside the room ({inside})")
+
         lengths = room.wall_lengths
         spans: dict[int, list] = {}
         for i, d in enumerate(self.discontinuities):
@@ -462,18 +467,18 @@ class Scene:
         for i, p in enumerate(self.poses):
             where = f"poses[{i}]"
             if not room.contains(p.emitter[None])[0]:
-                raise VrechoError(f"{where}.emitter: {np.round(p.emitter, 3).tolist()} is outside the room ({inside})")
+                raise outside_room(f"{where}.emitter:", p.emitter)
             mics = p.microphones(self.mic_array)
             outside = ~room.contains(mics)
             if outside.any():
                 k = int(np.argmax(outside))
-                raise VrechoError(f"{where}: microphone {k} at {np.round(mics[k], 3).tolist()} is outside the room ({inside})")
+                raise outside_room(f"{where}: microphone {k} at", mics[k])
             if p.target is not None and not 0 <= p.target < len(self.discontinuities):
-                raise VrechoError(f"{where}.target: no discontinuity {p.target}; the scene has "
-                                  + (f"discontinuities 0 to {len(self.discontinuities) - 1}" if self.discontinuities else "none"))
+                have = f"discontinuities 0 to {len(self.discontinuities) - 1}" if self.discontinuities else "none"
+                raise VrechoError(f"{where}.target: no discontinuity {p.target}; the scene has {have}")
         for i, s in enumerate(self.sources):
             if not room.contains(np.asarray(s.position)[None])[0]:
-                raise VrechoError(f"sources[{i}].position: {np.round(s.position, 3).tolist()} is outside the room ({inside})")
+                raise outside_room(f"sources[{i}].position:", s.position)
         for i, f in enumerate(self.furniture):
             if not point_in_polygon(f.footprint(), room.footprint).all() or f.top_m > room.height_m:
                 raise VrechoError(f"furniture[{i}] ({f.name}): not wholly inside the room ({inside})")
@@ -639,9 +644,12 @@ class Scene:
         Raises
         ------
         VrechoError
-            Naming the bad field.
+            Naming the bad field and its allowed range or choices: a missing or unknown field,
+            a value of the wrong type or outside its range, more than :data:`MAX_ITEMS` of a
+            list, or a scene :meth:`validate` refuses.
         """
-        check_keys(d, ("format", "version", "name", "room", *MAX_ITEMS, "camera_path", "mic_array", "emitter_p"), "scene")
+        check_keys(d, ("format", "version", "name", "room", *MAX_ITEMS, "camera_path", "mic_array", "emitter_p"),
+                   "scene")
         check_text(check_field(d, "format", "scene", "vrecho-scene"), "scene.format", choices=("vrecho-scene",))
         check_number(check_field(d, "version", "scene", 1), "scene.version", lo=1, hi=1)  # the only version
         mic = check_text(check_field(d, "mic_array", "scene", "phone"), "scene.mic_array", choices=tuple(MIC_ARRAYS))
@@ -675,7 +683,9 @@ def load_scene(path: str | Path) -> Scene:
     Raises
     ------
     VrechoError
-        If the file cannot be read, is not JSON, or describes an impossible scene.
+        If the file cannot be read or is not strict JSON (:func:`vrecho.errors.read_json`: not
+        UTF-8, too large or too deeply nested, NaN, huge numbers), or describes an impossible
+        scene (:meth:`Scene.from_dict`).
     """
     path = Path(path)
     d = read_json(path, "scene file", expect=dict)
