@@ -26,8 +26,8 @@ _reprlib.maxlevel = 3
 
 
 def _show(x) -> str:
-    """A value as a message shows it: its start, never megabytes of it."""
-    s = _reprlib.repr(x)
+    """A value as a message shows it: its start, never megabytes of it (a NumPy scalar as a number)."""
+    s = _reprlib.repr(x.item() if isinstance(x, np.generic) else x)
     return s if len(s) <= 80 else s[:77] + "..."
 
 

@@ -418,18 +418,13 @@ class Scene:
 
     # -- checks ---------------------------------------------------------------------------------
     def validate(self) -> None:
-        """Raise :class:`VrechoError` naming the first field that is impossible: more than
-        :data:`MAX_ITEMS` of a list, or a thing not on its wall or not inside the room."""
+        """Raise :class:`VrechoError` naming the first impossible field (too many, off its wall, out of the room)."""
         check_number(self.emitter_p, "scene.emitter_p", lo=0.0, hi=1.0)
         for key, most in MAX_ITEMS.items():
             check_list(getattr(self, key), key, hi=most)
         room = self.room
         lo, hi = room.box
         inside = f"the room spans x {lo[0]:g} to {hi[0]:g}, y {lo[1]:g} to {hi[1]:g}, z 0 to {hi[2]:g} m"
-
-        def outside_room(what: str, point) -> VrechoError:
-            return VrechoError(f"{what} {np.round(point, 3).tolist()} is outside the room ({inside})")
-
         lengths = room.wall_lengths
         spans: dict[int, list] = {}
         for i, d in enumerate(self.discontinuities):
@@ -451,17 +446,20 @@ class Scene:
         for i, p in enumerate(self.poses):
             where = f"poses[{i}]"
             if not room.contains(p.emitter[None])[0]:
-                raise outside_room(f"{where}.emitter:", p.emitter)
+                raise VrechoError(f"{where}.emitter: {np.round(p.emitter, 3).tolist()} is outside the room "
+                                  f"({inside})")
             mics = p.microphones(self.mic_array)
             outside = ~room.contains(mics)
             if outside.any():
                 k = int(np.argmax(outside))
-                raise outside_room(f"{where}: microphone {k} at", mics[k])
+                raise VrechoError(f"{where}: microphone {k} at {np.round(mics[k], 3).tolist()} is outside the room "
+                                  f"({inside})")
             if p.target is not None and not 0 <= p.target < len(self.discontinuities):
                 raise VrechoError(f"{where}.target: no discontinuity {p.target}; there are {len(self.discontinuities)}")
         for i, s in enumerate(self.sources):
             if not room.contains(np.asarray(s.position)[None])[0]:
-                raise outside_room(f"sources[{i}].position:", s.position)
+                raise VrechoError(f"sources[{i}].position: {np.round(s.position, 3).tolist()} is outside the room "
+                                  f"({inside})")
         for i, f in enumerate(self.furniture):
             if not point_in_polygon(f.footprint(), room.footprint).all() or f.top_m > room.height_m:
                 raise VrechoError(f"furniture[{i}] ({f.name}): not wholly inside the room ({inside})")
