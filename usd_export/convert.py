@@ -2,16 +2,23 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
+import soundfile as sf
 
 from localization import PlacedSource
-from vrecho.errors import VrechoError
+from vrecho.device import REACH_M
+from vrecho.errors import (VrechoError, check_field, check_keys, check_list, check_number, check_text, check_vector,
+                           read_json)
 from vrecho.signals import FS, emitted_sound, pulse_train
 
 from .stage import LabeledSurface
+
+MAX_SOURCES = 64
+"""The most sources a sources file lists."""
+WAV_MAX_S = 600
+"""The longest WAV a source may play, in seconds (the stage reads it whole)."""
 
 
 def from_reconstruction(result) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], list[LabeledSurface]]:
@@ -92,38 +99,56 @@ def sources_from_scene(scene, *, seconds: int = 10) -> list:
 
 
 def sources_from_json(path) -> list:
-    """Placed sources listed in a JSON file.
+    """Placed sources listed in a JSON file, every field and WAV header checked (no WAV is read
+    whole): call it before any long work.
 
     Parameters
     ----------
     path : str or pathlib.Path
-        A JSON file holding ``[{"name", "position": [x, y, z] (metres, Z up), "wav": path
-        (relative to the file), "confidence"?, "uncertainty_m"?}, ...]``.
+        A JSON file holding up to :data:`MAX_SOURCES` sources: ``[{"name"?, "position": [x, y, z]
+        (metres, Z up, each within :data:`REACH_M`), "wav": path (relative to the file),
+        "confidence"? (0 to 1, default 1), "uncertainty_m"? (0 to :data:`REACH_M`, or null)},
+        ...]``; no other fields.
 
     Returns
     -------
     list of localization.PlacedSource
-        One per item, its signal the WAV's path (read, and its rate with it, when the stage is
-        written; ``fs`` is 0 until then); unnamed items are ``source_<i>``.
+        One per item, its signal the WAV's path (read when the stage is written) and ``fs`` the
+        WAV's rate; unnamed items are ``source_<i>``.
 
     Raises
     ------
     VrechoError
-        For a file that cannot be read as JSON, that holds no list, or an item without
-        "position" and "wav".
+        Naming the file and the item's field: a file :func:`vrecho.errors.read_json` refuses, no
+        list, too many items, a missing, unknown or out-of-range field, or a WAV that does not
+        exist, is not audio, has no samples, a rate outside 8000 to 192000 Hz or is longer than
+        :data:`WAV_MAX_S`.
     """
     path = Path(path)
+    items = read_json(path, "sources file", expect=list)
     try:
-        items = json.loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise VrechoError(f"sources: cannot read {path} as JSON ({e})") from None
-    if not isinstance(items, list):
-        raise VrechoError(f"sources: {path} must hold a list of sources")
-    out = []
-    for i, d in enumerate(items):
-        if not isinstance(d, dict) or "position" not in d or "wav" not in d:
-            raise VrechoError(f"sources: {path} item {i} needs 'position' and 'wav'")
-        out.append(PlacedSource(np.asarray(d["position"], float), path.parent / d["wav"], 0,
-                                float(d.get("confidence", 1.0)), str(d.get("name", f"source_{i}")),
-                                d.get("uncertainty_m")))
-    return out
+        check_list(items, "sources", hi=MAX_SOURCES)
+        return [_placed(d, f"sources[{i}]", path.parent, f"source_{i}") for i, d in enumerate(items)]
+    except VrechoError as e:
+        raise VrechoError(f"sources file {path}: {e}") from None
+
+
+def _placed(d, where: str, folder: Path, name: str) -> PlacedSource:
+    check_keys(d, ("name", "position", "wav", "confidence", "uncertainty_m"), where)
+    position = check_vector(check_field(d, "position", where), f"{where}.position", lo=-REACH_M, hi=REACH_M)
+    wav = folder / check_text(check_field(d, "wav", where), f"{where}.wav", max_len=1000)
+    if not wav.is_file():
+        raise VrechoError(f"{where}.wav: {wav} is not a file")
+    try:
+        info = sf.info(str(wav))
+    except (RuntimeError, sf.LibsndfileError) as e:
+        raise VrechoError(f"{where}.wav: cannot read {wav} as audio ({e})") from None
+    if not 8000 <= info.samplerate <= 192000 or not 0 < info.frames <= WAV_MAX_S * info.samplerate:
+        raise VrechoError(f"{where}.wav: {wav} must have a rate from 8000 to 192000 Hz and 1 sample to {WAV_MAX_S} s, "
+                          f"has {info.frames} samples at {info.samplerate} Hz")
+    uncertainty = check_field(d, "uncertainty_m", where, None)
+    return PlacedSource(position, wav, int(info.samplerate),
+                        check_number(check_field(d, "confidence", where, 1.0), f"{where}.confidence", lo=0.0, hi=1.0),
+                        check_text(check_field(d, "name", where, name), f"{where}.name"),
+                        None if uncertainty is None else check_number(uncertainty, f"{where}.uncertainty_m", lo=0.0,
+                                                                      hi=REACH_M))

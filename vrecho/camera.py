@@ -14,14 +14,19 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.ndimage import map_coordinates
 
-from .device import MIC_ABOVE_EMITTER_M, DevicePose
-from .errors import VrechoError, check_field, check_number
+from .device import MIC_ABOVE_EMITTER_M, REACH_M, DevicePose
+from .errors import VrechoError, check_field, check_keys, check_list, check_number, check_vector
 
 CROP_SHAPE = (64, 25)
 """Rows x columns of the grayscale crop around a discontinuity (the paper's 64 x 25 image)."""
 
 
 DEPTH_MAX_M = 10.0
+
+MAX_KEYFRAMES = 1000
+"""The most keyframes of a :class:`CameraPath`."""
+DURATION_S = (0.1, 3600.0)
+"""A walk's length range, in seconds."""
 
 
 @dataclass(frozen=True)
@@ -280,7 +285,9 @@ class CameraPath:
     Raises
     ------
     VrechoError
-        For other shapes, or a duration not positive.
+        For other shapes, more than :data:`MAX_KEYFRAMES`, a coordinate beyond :data:`REACH_M`,
+        a walk whose camera looks at a point within 1 cm of itself (no direction: checked at the
+        keyframes and 15 points between each two), or a duration outside :data:`DURATION_S`.
     """
 
     positions: np.ndarray
@@ -288,14 +295,26 @@ class CameraPath:
     duration_s: float = 30.0
 
     def __post_init__(self):
-        self.positions = np.asarray(self.positions, dtype=float)
-        self.look_at = np.asarray(self.look_at, dtype=float)
-        if self.positions.ndim != 2 or self.positions.shape[1] != 3 or len(self.positions) < 2:
-            raise VrechoError(f"camera_path.positions: expected at least 2 [x, y, z] keyframes, got shape {self.positions.shape}")
+        try:
+            self.positions = np.asarray(self.positions, dtype=float)
+            self.look_at = np.asarray(self.look_at, dtype=float)
+        except (TypeError, ValueError):
+            raise VrechoError("camera_path: expected lists of [x, y, z] keyframes") from None
+        if self.positions.ndim != 2 or self.positions.shape[1] != 3 or not 2 <= len(self.positions) <= MAX_KEYFRAMES:
+            raise VrechoError(f"camera_path.positions: expected 2 to {MAX_KEYFRAMES} [x, y, z] keyframes, "
+                              f"got shape {self.positions.shape}")
         if self.look_at.shape != self.positions.shape:
             raise VrechoError("camera_path.look_at: expected one look-at point per keyframe")
-        if not self.duration_s > 0:
-            raise VrechoError(f"camera_path.duration_s: must be positive, got {self.duration_s}")
+        for name, v in (("positions", self.positions), ("look_at", self.look_at)):
+            if not (np.all(np.isfinite(v)) and np.abs(v).max() <= REACH_M):
+                raise VrechoError(f"camera_path.{name}: coordinates must be finite, from {-REACH_M:g} to {REACH_M:g} m")
+        t = np.linspace(0.0, 1.0, 16 * (len(self.positions) - 1) + 1)  # the keyframes and 15 points between each two
+        pos, tgt = self._track(t)
+        near = np.linalg.norm(tgt - pos, axis=1) < 0.01
+        if near.any():
+            raise VrechoError(f"camera_path.look_at: the camera looks at a point within 1 cm of itself at "
+                              f"{100 * t[np.argmax(near)]:.1f}% of the walk; no direction to look")
+        self.duration_s = check_number(self.duration_s, "camera_path.duration_s", lo=DURATION_S[0], hi=DURATION_S[1])
 
     def sample(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Evenly spaced points of the walk.
@@ -325,13 +344,15 @@ class CameraPath:
         positions, forward : numpy.ndarray [shape=(n, 3)]
             Camera positions (metres) and unit forward axes.
         """
-        k = np.linspace(0.0, 1.0, len(self.positions))
-        t = np.clip(np.asarray(t, float), 0.0, 1.0)
-        bc = "natural" if len(k) > 2 else "not-a-knot"
-        pos = CubicSpline(k, self.positions, bc_type=bc)(t)
-        tgt = CubicSpline(k, self.look_at, bc_type=bc)(t)
+        pos, tgt = self._track(np.clip(np.asarray(t, float), 0.0, 1.0))
         fwd = tgt - pos
         return pos, fwd / np.linalg.norm(fwd, axis=1, keepdims=True)
+
+    def _track(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Camera positions and the points they look at (n, 3) at fractions ``t`` of the walk."""
+        k = np.linspace(0.0, 1.0, len(self.positions))
+        bc = "natural" if len(k) > 2 else "not-a-knot"
+        return CubicSpline(k, self.positions, bc_type=bc)(t), CubicSpline(k, self.look_at, bc_type=bc)(t)
 
     def to_dict(self) -> dict:
         """The path's JSON form.
@@ -358,6 +379,12 @@ class CameraPath:
         -------
         CameraPath
         """
-        return cls(np.asarray(check_field(d, "positions", where), dtype=float),
-                   np.asarray(check_field(d, "look_at", where), dtype=float),
-                   check_number(check_field(d, "duration_s", where, 30.0), f"{where}.duration_s"))
+        check_keys(d, ("positions", "look_at", "duration_s"), where)
+        points = {}
+        for key in ("positions", "look_at"):
+            found = check_list(check_field(d, key, where), f"{where}.{key}", lo=2, hi=MAX_KEYFRAMES)
+            points[key] = np.array([check_vector(p, f"{where}.{key}[{i}]", lo=-REACH_M, hi=REACH_M)
+                                    for i, p in enumerate(found)])
+        return cls(points["positions"], points["look_at"],
+                   check_number(check_field(d, "duration_s", where, 30.0), f"{where}.duration_s",
+                                lo=DURATION_S[0], hi=DURATION_S[1]))

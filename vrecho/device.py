@@ -9,9 +9,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import VrechoError, check_field, check_unit, check_vector
+from .errors import VrechoError, check_field, check_keys, check_number, check_unit, check_vector
 
 MIC_ABOVE_EMITTER_M = 0.07
+
+REACH_M = 1000.0
+"""The largest ``|x|``, ``|y|`` or ``|z|`` of a point read from a scene, in metres (its scene then
+checks that it lies in the room): where open3d's float32 still places a point to 0.1 mm."""
 
 
 @dataclass(frozen=True)
@@ -90,7 +94,7 @@ class DevicePose:
     def __post_init__(self):
         self.emitter = check_vector(self.emitter, "pose.emitter")
         self.forward = check_unit(self.forward, "pose.forward")
-        up = check_vector(self.up, "pose.up")
+        up = check_unit(self.up, "pose.up")
         if abs(np.dot(up, self.forward)) > 1e-12:
             up = up - np.dot(up, self.forward) * self.forward
         if np.linalg.norm(up) < 1e-6:
@@ -156,11 +160,15 @@ class DevicePose:
             Naming the field under ``where`` that is missing or impossible, e.g. a ``target``
             that is not an index or null.
         """
+        check_keys(d, ("emitter", "forward", "up", "target"), where)
         target = check_field(d, "target", where, None)
-        if target is not None and (isinstance(target, bool) or not isinstance(target, int)):
-            raise VrechoError(f"{where}.target: expected a discontinuity index or null, got {target!r}")
+        if target is not None:
+            check_number(target, f"{where}.target", lo=0)  # its scene checks it names one of its own
+            if not isinstance(target, int):
+                raise VrechoError(f"{where}.target: expected a discontinuity index (a whole number) or null, "
+                                  f"got {target!r}")
         try:
-            return cls(check_vector(check_field(d, "emitter", where), f"{where}.emitter"),
+            return cls(check_vector(check_field(d, "emitter", where), f"{where}.emitter", lo=-REACH_M, hi=REACH_M),
                        check_field(d, "forward", where), check_field(d, "up", where, [0.0, 0.0, 1.0]), target)
         except VrechoError as e:
             raise VrechoError(str(e).replace("pose.", f"{where}.", 1)) from None

@@ -14,8 +14,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import VrechoError, check_field, check_number, check_vector
+from .device import REACH_M
+from .errors import check_field, check_keys, check_number, check_text, check_vector
 from .materials import Material
+
+SIZE_M = (0.01, 50.0)
+"""Each side of a piece, and its underside's height, in metres: from 1 cm to what the largest room
+holds (:data:`vrecho.scene.ROOM_SIZE_M`); its scene checks it stands wholly inside its own room."""
 
 
 @dataclass(frozen=True)
@@ -40,7 +45,8 @@ class Furniture:
     Raises
     ------
     VrechoError
-        For a size under 1 cm or not finite, or a negative ``z0``.
+        For a size outside 1 cm to 50 m (:data:`SIZE_M`) or not finite, a ``z0`` outside 0 to
+        50 m, a ``yaw_deg`` outside -360 to 360 or a ``center`` that is not two finite numbers.
 
     Examples
     --------
@@ -58,13 +64,12 @@ class Furniture:
     material: Material = Material("wood", (0.15, 0.11, 0.1, 0.07, 0.06, 0.07, 0.07))
 
     def __post_init__(self):
-        size = tuple(float(v) for v in self.size)
-        if len(size) != 3 or not all(np.isfinite(v) and v >= 0.01 for v in size):
-            raise VrechoError(f"furniture {self.name!r}: size needs three lengths of at least 1 cm, got {self.size!r}")
-        if not (np.isfinite(self.z0) and self.z0 >= 0):
-            raise VrechoError(f"furniture {self.name!r}: z0 must be at least 0, got {self.z0}")
-        object.__setattr__(self, "size", size)
-        object.__setattr__(self, "center", tuple(float(v) for v in self.center))
+        where = f"furniture {self.name!r}"
+        size = check_vector(self.size, f"{where} size", 3, lo=SIZE_M[0], hi=SIZE_M[1])
+        object.__setattr__(self, "z0", check_number(self.z0, f"{where} z0", lo=0.0, hi=SIZE_M[1]))
+        object.__setattr__(self, "yaw_deg", check_number(self.yaw_deg, f"{where} yaw_deg", lo=-360.0, hi=360.0))
+        object.__setattr__(self, "size", tuple(size.tolist()))
+        object.__setattr__(self, "center", tuple(check_vector(self.center, f"{where} center", 2).tolist()))
 
     @property
     def top_m(self) -> float:
@@ -169,14 +174,12 @@ class Furniture:
         -------
         Furniture
         """
-        name = str(check_field(d, "name", where, "furniture"))
-        center = check_vector(check_field(d, "center", where), f"{where}.center", 2)
-        size = check_vector(check_field(d, "size", where), f"{where}.size", 3)
-        z0 = check_number(check_field(d, "z0", where, 0.0), f"{where}.z0", lo=0.0)
-        yaw = check_number(check_field(d, "yaw_deg", where, 0.0), f"{where}.yaw_deg")
+        check_keys(d, ("name", "center", "size", "z0", "yaw_deg", "material"), where)
+        name = check_text(check_field(d, "name", where, "furniture"), f"{where}.name")
+        center = check_vector(check_field(d, "center", where), f"{where}.center", 2, lo=-REACH_M, hi=REACH_M)
+        size = check_vector(check_field(d, "size", where), f"{where}.size", 3, lo=SIZE_M[0], hi=SIZE_M[1])
+        z0 = check_number(check_field(d, "z0", where, 0.0), f"{where}.z0", lo=0.0, hi=SIZE_M[1])
+        yaw = check_number(check_field(d, "yaw_deg", where, 0.0), f"{where}.yaw_deg", lo=-360.0, hi=360.0)
         material = check_field(d, "material", where, None)
         kwargs = {} if material is None else {"material": Material.from_dict(material, f"{where}.material")}
-        try:
-            return cls(name, tuple(center), tuple(size), z0, yaw, **kwargs)
-        except VrechoError as e:
-            raise VrechoError(f"{where}: {e}") from None
+        return cls(name, tuple(center.tolist()), tuple(size.tolist()), z0, yaw, **kwargs)

@@ -10,9 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
-from .errors import VrechoError, check_field, check_number
+from .errors import VrechoError, check_field, check_keys, check_number, check_text, check_vector
 
 BANDS_HZ = (125, 250, 500, 1000, 2000, 4000, 8000)
 """Octave-band centres (Hz) of every absorption coefficient in a scene."""
@@ -48,12 +46,10 @@ class Material:
     scattering: float = 0.1
 
     def __post_init__(self):
-        a = tuple(float(v) for v in self.absorption)
-        if len(a) != len(BANDS_HZ) or not all(np.isfinite(v) and 0.0 <= v <= 1.0 for v in a):
-            raise VrechoError(f"material {self.name!r}: absorption needs {len(BANDS_HZ)} values in [0, 1], got {self.absorption!r}")
-        if not 0.0 <= self.scattering <= 1.0:
-            raise VrechoError(f"material {self.name!r}: scattering must be in [0, 1], got {self.scattering}")
-        object.__setattr__(self, "absorption", a)
+        where = f"material {self.name!r}"  # one per band of BANDS_HZ
+        a = check_vector(self.absorption, f"{where} absorption", len(BANDS_HZ), lo=0.0, hi=1.0)
+        check_number(self.scattering, f"{where} scattering", lo=0.0, hi=1.0)
+        object.__setattr__(self, "absorption", tuple(a.tolist()))
 
     @classmethod
     def from_database(cls, name: str, *, scattering: float = 0.1) -> "Material":
@@ -112,10 +108,12 @@ class Material:
         Material
         """
         if isinstance(d, str):
-            return cls.from_database(d)
-        name = str(check_field(d, "name", where, "custom"))
-        absorption = check_field(d, "absorption", where)
-        if not isinstance(absorption, (list, tuple)) or len(absorption) != len(BANDS_HZ):
-            raise VrechoError(f"{where}.absorption: expected {len(BANDS_HZ)} values (bands {BANDS_HZ} Hz), got {absorption!r}")
-        vals = tuple(check_number(v, f"{where}.absorption[{i}]", lo=0.0, hi=1.0) for i, v in enumerate(absorption))
-        return cls(name, vals, check_number(check_field(d, "scattering", where, 0.1), f"{where}.scattering", lo=0.0, hi=1.0))
+            try:
+                return cls.from_database(check_text(d, where))
+            except VrechoError as e:
+                raise VrechoError(f"{where}: {e}") from None
+        check_keys(d, ("name", "absorption", "scattering"), where)
+        name = check_text(check_field(d, "name", where, "custom"), f"{where}.name")
+        vals = check_vector(check_field(d, "absorption", where), f"{where}.absorption", len(BANDS_HZ), lo=0.0, hi=1.0)
+        return cls(name, tuple(vals.tolist()),
+                   check_number(check_field(d, "scattering", where, 0.1), f"{where}.scattering", lo=0.0, hi=1.0))

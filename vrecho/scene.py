@@ -20,8 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from .camera import CameraPath
-from .device import MIC_ARRAYS, DevicePose, MicArray
-from .errors import VrechoError, check_field, check_number, check_vector
+from .device import MIC_ARRAYS, REACH_M, DevicePose, MicArray
+from .errors import (VrechoError, check_field, check_keys, check_list, check_number, check_text, check_vector,
+                     read_json)
 from .furniture import Furniture
 from .geometry import distance_to_polygon, point_in_polygon, rectangles_around, segments_cross, signed_area
 from .io import atomic_write_text
@@ -31,6 +32,14 @@ from .signals import SOUNDS
 KINDS = ("open", "glass", "mirror")
 DEPTH_RANGE_M = (0.25, 3.0)
 MAX_INCIDENCE_DEG = 15.0
+
+ROOM_SIZE_M = (1.0, 50.0)
+"""A room's height and each side of its footprint's bounding box, in metres: impulse responses grow
+some 500 samples a metre (a 50 m room: 1 s and 150 MB to simulate; a room 1e9 m high: 2 TiB)."""
+MAX_CORNERS = 32
+MAX_ITEMS = {"discontinuities": 32, "poses": 1000, "sources": 32, "furniture": 32}
+"""The most of each list (and :data:`MAX_CORNERS` of a footprint): walls add to a simulation's time
+(a room of 180 patches: 6 s an impulse response), poses and sources to its impulse responses."""
 
 
 @dataclass(frozen=True)
@@ -81,8 +90,10 @@ class Room:
     Raises
     ------
     VrechoError
-        For fewer than 3 finite corners, a clockwise or self-crossing footprint, a wall shorter
-        than 5 cm, a height not positive, or a wrong number of wall materials.
+        For other than 3 to :data:`MAX_CORNERS` finite corners, a corner beyond
+        :data:`~vrecho.device.REACH_M`, a height or a side of the footprint's bounding box
+        outside :data:`ROOM_SIZE_M`, a clockwise or self-crossing footprint, a wall shorter than
+        5 cm, or a wrong number of wall materials.
     """
 
     footprint: np.ndarray
@@ -94,12 +105,17 @@ class Room:
     def __post_init__(self):
         self.footprint = np.asarray(self.footprint, dtype=float)
         fp = self.footprint
-        if fp.ndim != 2 or fp.shape[1] != 2 or fp.shape[0] < 3 or not np.all(np.isfinite(fp)):
-            raise VrechoError(f"room.footprint: expected at least 3 finite [x, y] corners, got shape {fp.shape}")
-        if not self.height_m > 0:
-            raise VrechoError(f"room.height_m: must be positive, got {self.height_m}")
-        if len(self.walls) != len(fp):
-            raise VrechoError(f"room.walls: expected one material per wall ({len(fp)}), got {len(self.walls)}")
+        if fp.ndim != 2 or fp.shape[1] != 2 or not 3 <= fp.shape[0] <= MAX_CORNERS or not np.all(np.isfinite(fp)):
+            raise VrechoError(f"room.footprint: expected 3 to {MAX_CORNERS} finite [x, y] corners, got shape {fp.shape}")
+        if np.abs(fp).max() > REACH_M:
+            raise VrechoError(f"room.footprint: corners must lie within {REACH_M:g} m of the origin in x and y")
+        lo, hi = ROOM_SIZE_M
+        extent = fp.max(axis=0) - fp.min(axis=0)
+        if extent.min() < lo or extent.max() > hi:
+            raise VrechoError(f"room.footprint: spans {extent[0]:g} x {extent[1]:g} m; each side of its bounding box "
+                              f"must be from {lo:g} to {hi:g} m")
+        self.height_m = check_number(self.height_m, "room.height_m", lo=lo, hi=hi)
+        check_list(self.walls, "room.walls (one material per wall)", lo=len(fp), hi=len(fp))
         if np.min(self.wall_lengths) < 0.05:
             raise VrechoError(f"room.footprint: wall {int(np.argmin(self.wall_lengths))} is shorter than 5 cm")
         if signed_area(fp) <= 0:
@@ -187,17 +203,15 @@ class Room:
         -------
         Room
         """
-        footprint = check_field(d, "footprint", where)
-        try:
-            fp = np.asarray(footprint, dtype=float)
-        except (TypeError, ValueError):
-            raise VrechoError(f"{where}.footprint: expected a list of [x, y] corners") from None
-        height = check_number(check_field(d, "height_m", where), f"{where}.height_m")
+        check_keys(d, ("footprint", "height_m", "walls", "floor", "ceiling"), where)
+        corners = check_list(check_field(d, "footprint", where), f"{where}.footprint", lo=3, hi=MAX_CORNERS)
+        fp = np.array([check_vector(c, f"{where}.footprint[{i}]", 2, lo=-REACH_M, hi=REACH_M)
+                       for i, c in enumerate(corners)])
+        height = check_field(d, "height_m", where)  # checked, with the footprint's extent, by the room itself
         walls = check_field(d, "walls", where)
         if isinstance(walls, (str, dict)):
             walls = [walls] * len(fp)
-        if not isinstance(walls, list):
-            raise VrechoError(f"{where}.walls: expected a material or a list of them")
+        check_list(walls, f"{where}.walls", lo=len(fp), hi=len(fp))
         return cls(fp, height, [Material.from_dict(w, f"{where}.walls[{i}]") for i, w in enumerate(walls)],
                    Material.from_dict(check_field(d, "floor", where), f"{where}.floor"),
                    Material.from_dict(check_field(d, "ceiling", where), f"{where}.ceiling"))
@@ -289,25 +303,28 @@ class Discontinuity:
         -------
         Discontinuity
         """
-        kind = check_field(d, "kind", where)
-        if kind not in KINDS:
-            raise VrechoError(f"{where}.kind: expected one of {KINDS}, got {kind!r}")
+        check_keys(d, ("wall", "center_u_m", "center_z_m", "width_m", "height_m", "kind", "absorption", "scattering",
+                       "depth_sensor_sees_through"), where)
+        kind = check_text(check_field(d, "kind", where), f"{where}.kind", choices=KINDS)
         wall = check_field(d, "wall", where)
-        if isinstance(wall, bool) or not isinstance(wall, int):
-            raise VrechoError(f"{where}.wall: expected a wall index, got {wall!r}")
+        check_number(wall, f"{where}.wall", lo=0, hi=MAX_CORNERS - 1)
+        if not isinstance(wall, int):
+            raise VrechoError(f"{where}.wall: expected a wall index (a whole number), got {wall!r}")
         default_abs = {"open": (1.0,) * 7, "glass": WINDOW_GLASS, "mirror": MIRROR}[kind]
-        absorption = check_field(d, "absorption", where, list(default_abs))
-        if not isinstance(absorption, (list, tuple)) or len(absorption) != len(BANDS_HZ):
-            raise VrechoError(f"{where}.absorption: expected {len(BANDS_HZ)} values, got {absorption!r}")
+        absorption = check_vector(check_field(d, "absorption", where, default_abs), f"{where}.absorption",
+                                  len(BANDS_HZ), lo=0.0, hi=1.0)
+        sees = check_field(d, "depth_sensor_sees_through", where, True)
+        if not isinstance(sees, bool):
+            raise VrechoError(f"{where}.depth_sensor_sees_through: expected true or false, got {type(sees).__name__}")
+        along, up = 2 * ROOM_SIZE_M[1], ROOM_SIZE_M[1]  # Scene.validate then checks it against its wall
         return cls(wall,
-                   check_number(check_field(d, "center_u_m", where), f"{where}.center_u_m"),
-                   check_number(check_field(d, "center_z_m", where), f"{where}.center_z_m"),
-                   check_number(check_field(d, "width_m", where), f"{where}.width_m", lo=0.01),
-                   check_number(check_field(d, "height_m", where), f"{where}.height_m", lo=0.01),
-                   kind,
-                   tuple(check_number(a, f"{where}.absorption[{i}]", lo=0.0, hi=1.0) for i, a in enumerate(absorption)),
+                   check_number(check_field(d, "center_u_m", where), f"{where}.center_u_m", lo=0.0, hi=along),
+                   check_number(check_field(d, "center_z_m", where), f"{where}.center_z_m", lo=0.0, hi=up),
+                   check_number(check_field(d, "width_m", where), f"{where}.width_m", lo=0.01, hi=along),
+                   check_number(check_field(d, "height_m", where), f"{where}.height_m", lo=0.01, hi=up),
+                   kind, tuple(absorption.tolist()),
                    check_number(check_field(d, "scattering", where, 0.02), f"{where}.scattering", lo=0.0, hi=1.0),
-                   bool(check_field(d, "depth_sensor_sees_through", where, True)))
+                   sees)
 
 
 @dataclass
@@ -353,11 +370,10 @@ class SoundSource:
         -------
         SoundSource
         """
-        sound = check_field(d, "sound", where)
-        if sound not in SOUNDS:
-            raise VrechoError(f"{where}.sound: expected one of {SOUNDS}, got {sound!r}")
-        return cls(check_vector(check_field(d, "position", where), f"{where}.position"), sound,
-                   check_number(check_field(d, "gain_db", where, 0.0), f"{where}.gain_db", lo=-60, hi=40))
+        check_keys(d, ("position", "sound", "gain_db"), where)
+        sound = check_text(check_field(d, "sound", where), f"{where}.sound", choices=SOUNDS)
+        return cls(check_vector(check_field(d, "position", where), f"{where}.position", lo=-REACH_M, hi=REACH_M), sound,
+                   check_number(check_field(d, "gain_db", where, 0.0), f"{where}.gain_db", lo=-60.0, hi=40.0))
 
 
 @dataclass
@@ -402,9 +418,13 @@ class Scene:
 
     # -- checks ---------------------------------------------------------------------------------
     def validate(self) -> None:
-        """Raise :class:`VrechoError` naming the first field that is impossible."""
+        """Raise :class:`VrechoError` naming the first impossible field (too many, off its wall, out of the room)."""
         check_number(self.emitter_p, "scene.emitter_p", lo=0.0, hi=1.0)
+        for key, most in MAX_ITEMS.items():
+            check_list(getattr(self, key), key, hi=most)
         room = self.room
+        lo, hi = room.box
+        inside = f"the room spans x {lo[0]:g} to {hi[0]:g}, y {lo[1]:g} to {hi[1]:g}, z 0 to {hi[2]:g} m"
         lengths = room.wall_lengths
         spans: dict[int, list] = {}
         for i, d in enumerate(self.discontinuities):
@@ -426,24 +446,27 @@ class Scene:
         for i, p in enumerate(self.poses):
             where = f"poses[{i}]"
             if not room.contains(p.emitter[None])[0]:
-                raise VrechoError(f"{where}.emitter: {np.round(p.emitter, 3).tolist()} is outside the room")
+                raise VrechoError(f"{where}.emitter: {np.round(p.emitter, 3).tolist()} is outside the room "
+                                  f"({inside})")
             mics = p.microphones(self.mic_array)
             outside = ~room.contains(mics)
             if outside.any():
                 k = int(np.argmax(outside))
-                raise VrechoError(f"{where}: microphone {k} at {np.round(mics[k], 3).tolist()} is outside the room")
+                raise VrechoError(f"{where}: microphone {k} at {np.round(mics[k], 3).tolist()} is outside the room "
+                                  f"({inside})")
             if p.target is not None and not 0 <= p.target < len(self.discontinuities):
-                raise VrechoError(f"{where}.target: no discontinuity {p.target}")
+                raise VrechoError(f"{where}.target: no discontinuity {p.target}; there are {len(self.discontinuities)}")
         for i, s in enumerate(self.sources):
             if not room.contains(np.asarray(s.position)[None])[0]:
-                raise VrechoError(f"sources[{i}].position: {np.round(s.position, 3).tolist()} is outside the room")
+                raise VrechoError(f"sources[{i}].position: {np.round(s.position, 3).tolist()} is outside the room "
+                                  f"({inside})")
         for i, f in enumerate(self.furniture):
             if not point_in_polygon(f.footprint(), room.footprint).all() or f.top_m > room.height_m:
-                raise VrechoError(f"furniture[{i}] ({f.name}): not wholly inside the room")
+                raise VrechoError(f"furniture[{i}] ({f.name}): not wholly inside the room ({inside})")
         if self.camera_path is not None:
             outside = ~room.contains(self.camera_path.positions)
             if outside.any():
-                raise VrechoError(f"camera_path.positions[{int(np.argmax(outside))}]: outside the room")
+                raise VrechoError(f"camera_path.positions[{int(np.argmax(outside))}]: outside the room ({inside})")
 
     # -- geometry -------------------------------------------------------------------------------
     def discontinuity_corners(self, index: int) -> np.ndarray:
@@ -602,30 +625,27 @@ class Scene:
         Raises
         ------
         VrechoError
-            Naming the bad field.
+            Naming the bad field and its allowed range or choices: a missing or unknown field, a
+            value of the wrong type or out of range, or a scene :meth:`validate` refuses.
         """
-        if not isinstance(d, dict):
-            raise VrechoError(f"scene: expected a JSON object, got {type(d).__name__}")
-        if d.get("format", "vrecho-scene") != "vrecho-scene":
-            raise VrechoError(f"scene.format: expected 'vrecho-scene', got {d.get('format')!r}")
-        mic = d.get("mic_array", "phone")
-        if mic not in MIC_ARRAYS:
-            raise VrechoError(f"scene.mic_array: expected one of {tuple(MIC_ARRAYS)}, got {mic!r}")
+        check_keys(d, ("format", "version", "name", "room", *MAX_ITEMS, "camera_path", "mic_array", "emitter_p"),
+                   "scene")
+        check_text(check_field(d, "format", "scene", "vrecho-scene"), "scene.format", choices=("vrecho-scene",))
+        check_number(check_field(d, "version", "scene", 1), "scene.version", lo=1, hi=1)  # the only version
+        mic = check_text(check_field(d, "mic_array", "scene", "phone"), "scene.mic_array", choices=tuple(MIC_ARRAYS))
 
-        def items(key):
-            v = d.get(key, []) or []
-            if not isinstance(v, list):
-                raise VrechoError(f"scene.{key}: expected a list")
-            return v
+        def items(key, read):
+            found = check_list(check_field(d, key, "scene", []), key, hi=MAX_ITEMS[key])
+            return [read(x, f"{key}[{i}]") for i, x in enumerate(found)]
 
-        cp = d.get("camera_path")
-        return cls(str(check_field(d, "name", "scene", "scene")), Room.from_dict(check_field(d, "room", "scene")),
-                   [Discontinuity.from_dict(x, f"discontinuities[{i}]") for i, x in enumerate(items("discontinuities"))],
-                   [DevicePose.from_dict(x, f"poses[{i}]") for i, x in enumerate(items("poses"))],
-                   [SoundSource.from_dict(x, f"sources[{i}]") for i, x in enumerate(items("sources"))],
+        cp = check_field(d, "camera_path", "scene", None)
+        return cls(check_text(check_field(d, "name", "scene", "scene"), "scene.name"),
+                   Room.from_dict(check_field(d, "room", "scene")),
+                   items("discontinuities", Discontinuity.from_dict), items("poses", DevicePose.from_dict),
+                   items("sources", SoundSource.from_dict),
                    None if cp is None else CameraPath.from_dict(cp), MIC_ARRAYS[mic],
-                   check_number(d.get("emitter_p", 0.7), "scene.emitter_p", lo=0.0, hi=1.0),
-                   [Furniture.from_dict(x, f"furniture[{i}]") for i, x in enumerate(items("furniture"))])
+                   check_number(check_field(d, "emitter_p", "scene", 0.7), "scene.emitter_p", lo=0.0, hi=1.0),
+                   items("furniture", Furniture.from_dict))
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -643,17 +663,11 @@ def load_scene(path: str | Path) -> Scene:
     Raises
     ------
     VrechoError
-        If the file cannot be read, is not JSON, or describes an impossible scene.
+        If the file is not strict JSON (:func:`vrecho.errors.read_json`) or describes an
+        impossible scene (:meth:`Scene.from_dict`).
     """
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as e:
-        raise VrechoError(f"scene file {path}: cannot read ({e.strerror})") from None
-    try:
-        d = json.loads(text)
-    except json.JSONDecodeError as e:
-        raise VrechoError(f"scene file {path}: not valid JSON (line {e.lineno}: {e.msg})") from None
+    d = read_json(path, "scene file", expect=dict)
     try:
         return Scene.from_dict(d)
     except VrechoError as e:

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ..errors import VrechoError
+from ..errors import VrechoError, read_json
 from ..features import logmel
 from ..io import atomic_write_text, ensure_writable_dir
 from ..scene import load_scene
@@ -230,7 +230,7 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
     manifest_path = out / "manifest.json"
     identity = {"format": "vrecho-dataset", "version": FORMAT_VERSION, "preset": preset, "seed": int(seed)}
     if manifest_path.exists():
-        old = json.loads(manifest_path.read_text())
+        old = read_json(manifest_path, "dataset manifest", expect=dict)
         if {k: old.get(k) for k in identity} != identity:
             raise VrechoError(f"out: {out} holds another dataset ({old.get('preset')}, seed {old.get('seed')}); "
                               "choose an empty folder")
@@ -328,7 +328,7 @@ class Dataset:
         manifest_path = self.path / "manifest.json"
         if not manifest_path.exists():
             raise VrechoError(f"dataset {self.path}: no manifest.json; not a vrecho dataset")
-        self.manifest = json.loads(manifest_path.read_text())
+        self.manifest = read_json(manifest_path, "dataset manifest", expect=dict)
         if not self.manifest.get("complete"):
             raise VrechoError(f"dataset {self.path}: unfinished; run `vrecho generate` again to complete it")
         root = zarr.open_group(self.path / "frames.zarr", mode="r")

@@ -27,7 +27,7 @@ import numpy as np
 import torch  # this module trains and judges models: torch is what it is for
 from scipy.signal import resample_poly
 
-from ..errors import VrechoError
+from ..errors import VrechoError, read_json
 from ..features import echo_features
 from ..io import OutputFolder, atomic_write_text, ensure_writable_dir
 from ..models import HEADS, EchoCNN, FeatureBaseline, build
@@ -315,7 +315,7 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
     identity = {"format": "vrecho-run", "dataset": {k: m[k] for k in ("preset", "seed", "n_frames")}, "seed": seed}
     run_path = out / "run.json"
     if run_path.exists():
-        old = json.loads(run_path.read_text())
+        old = read_json(run_path, "run", expect=dict)
         if old != identity:
             raise VrechoError(f"out: {out} holds models of another dataset or seed ({old.get('dataset')}, seed "
                               f"{old.get('seed')}); choose another folder")
@@ -325,7 +325,7 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
     atomic_write_text(run_path, json.dumps(identity, indent=1))
     (out / "models").mkdir(exist_ok=True)
     records_path = out / "training.json"
-    records = json.loads(records_path.read_text()) if records_path.exists() else {}
+    records = read_json(records_path, "training records", expect=dict) if records_path.exists() else {}
     for m in chosen:
         path = m.path(out)
         if m.name in records and path.exists():
