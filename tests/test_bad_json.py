@@ -228,7 +228,6 @@ def test_reconstruct_of_a_bad_scene_exits_2_and_writes_nothing(tmp_path, capsys,
     assert not out.exists()
 
 
-@pytest.mark.xfail(strict=True, reason="until vrecho/app/scans.export calls sources_from_json before open_source")
 def test_export_refuses_a_bad_sources_file_before_any_long_work(tmp_path, monkeypatch, capsys):
     from vrecho.app import scans
     from vrecho.cli import main

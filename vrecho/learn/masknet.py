@@ -31,6 +31,7 @@ from localization.capture import FS
 from localization.masknet import NFFT, features, masknet_class
 from localization.separate import analysis, steering
 
+from ..errors import VrechoError, read_json
 from ..io import ensure_writable_dir
 from ..sim.ambient import random_walk, simulate_walk_capture
 
@@ -104,12 +105,20 @@ def make_examples(data_dir: Path, *, rooms: int = 1200, jobs: int = 2, seed: int
     ensure_writable_dir(data_dir)
     stamp = data_dir / "made.json"
     want = {"rooms": rooms, "jobs": jobs, "seed": seed, "nfft": NFFT}
-    if stamp.exists() and json.loads(stamp.read_text()) == want:
+    if stamp.exists() and _stamp(stamp) == want:
         return [data_dir / f"share{s}.npz" for s in range(jobs)]
     with get_context("spawn").Pool(jobs) as pool:
         paths = pool.map(_examples, [(s, jobs, rooms, seed, data_dir) for s in range(jobs)])
     stamp.write_text(json.dumps(want))
     return paths
+
+
+def _stamp(path: Path):
+    """What made the shards, or None where the stamp is damaged (they are made again)."""
+    try:
+        return read_json(path, "mask network data stamp")
+    except VrechoError:
+        return None
 
 
 def _load_examples(paths: list[Path], dev: str):
