@@ -251,8 +251,8 @@ def triangulate(centers: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray
     x : numpy.ndarray [shape=(3,)]
         The point in metres.
     sigma : float
-        Its standard error in metres; NaN for fewer than three rays (and both NaN where the
-        rays are all parallel).
+        Its standard error in metres; ``inf`` (unknown) for fewer than three rays, or for rays
+        all parallel (no crossing: ``x`` is then their common line's point nearest the origin).
 
     Examples
     --------
@@ -266,11 +266,9 @@ def triangulate(centers: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray
     """
     P = np.eye(3)[None] - directions[:, :, None] * directions[:, None, :]
     A = P.sum(axis=0)
-    if np.linalg.cond(A) > 1e8:  # every ray in line: no crossing
-        return np.full(3, np.nan), float("nan")
-    x = np.linalg.solve(A, np.einsum("nij,nj->i", P, centers))
-    if len(centers) < 3:
-        return x, float("nan")
+    x = np.linalg.lstsq(A, np.einsum("nij,nj->i", P, centers), rcond=1e-8)[0]
+    if len(centers) < 3 or np.linalg.cond(A) > 1e8:
+        return x, float("inf")
     resid = np.einsum("nij,nj->ni", P, x - centers)
     sigma2 = (resid ** 2).sum() / (2 * len(centers) - 3)
     return x, float(np.sqrt(np.trace(np.linalg.inv(A)) * sigma2))
@@ -533,8 +531,7 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
         sphere = _sphere(40000)
         for i, x in enumerate(positions):
             rays = np.array([_pose_direction(votes, k, x, sphere) for k in range(len(captures))])
-            sigma = triangulate(centers, rays)[1]
-            unc[i] = sigma if np.isfinite(sigma) else np.inf
+            unc[i] = triangulate(centers, rays)[1]
     d = positions[None] - centers[:, None]
     return Located(positions, unc, np.array(strength) / max(strength[:1], default=1.0),
                    d / np.linalg.norm(d, axis=-1, keepdims=True))
