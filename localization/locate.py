@@ -34,6 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 from vrecho.errors import VrechoError, check_number
 from vrecho.signals import SPEED_OF_SOUND
@@ -371,8 +372,6 @@ class Votes:
         float
             The map's value; ``inf`` where no capture has a voting bin.
         """
-        from scipy.optimize import minimize_scalar
-
         k = len(self.captures)
         n = np.array([len(w) / BIN_OVERLAP for w in self.weights])
         m = np.array([c.n_mics for c in self.captures])[n > 0]
