@@ -536,8 +536,8 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
                    d / np.linalg.norm(d, axis=-1, keepdims=True))
 
 
-def check_count(n, where: str, hi: int) -> int:
-    """``n`` as an int if it is a whole number from 1 to ``hi`` (not a bool).
+def check_count(n, where: str, hi: int, lo: int = 1) -> int:
+    """``n`` as an int if it is a whole number from ``lo`` to ``hi`` (not a bool).
 
     Parameters
     ----------
@@ -545,8 +545,8 @@ def check_count(n, where: str, hi: int) -> int:
         The value given.
     where : str
         The argument's name, which errors name.
-    hi : int
-        The largest allowed.
+    hi, lo : int
+        The largest and the smallest allowed (``lo`` 1 by default).
 
     Returns
     -------
@@ -557,8 +557,8 @@ def check_count(n, where: str, hi: int) -> int:
     VrechoError
         Naming ``where`` and the allowed range, for anything else.
     """
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= hi:
-        raise VrechoError(f"{where}: expected a whole number from 1 to {hi}, got {n!r}")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not lo <= n <= hi:
+        raise VrechoError(f"{where}: expected a whole number from {lo} to {hi}, got {n!r}")
     return int(n)
 
 
@@ -576,10 +576,10 @@ def doa(capture: Capture, n_sources: int, *, method: str = "NormMUSIC", n_grid: 
     method : str
         One of :data:`PRA_METHODS` (default "NormMUSIC").
     n_grid : int
-        The number of points of the sphere grid searched, 1 to :data:`MAX_DOA_GRID` (default
+        The number of points of the sphere grid searched, 100 to :data:`MAX_DOA_GRID` (default
         6000).
     n_freq : int, optional
-        Use only that many frequency bins (1 to the band's), evenly spread over the band
+        Use only that many frequency bins (2 to the band's), evenly spread over the band
         :data:`BAND_HZ` (CSSM, WAVES and TOPS take about 20 s per capture on all of them);
         None: the whole band.
 
@@ -606,9 +606,9 @@ def doa(capture: Capture, n_sources: int, *, method: str = "NormMUSIC", n_grid: 
     if method in ("MUSIC", "NormMUSIC", "CSSM", "WAVES", "TOPS") and n_sources >= capture.n_mics:
         raise VrechoError(f"{method} finds fewer sources than microphones: {n_sources} sources with "
                           f"{capture.n_mics} microphones")
-    check_count(n_grid, "n_grid", MAX_DOA_GRID)
-    if n_freq is not None:
-        check_count(n_freq, "n_freq", int(np.sum(_band(capture.fs))))
+    check_count(n_grid, "n_grid", MAX_DOA_GRID, 100)
+    if n_freq is not None:  # TOPS, CSSM and WAVES fail on a single frequency
+        check_count(n_freq, "n_freq", int(np.sum(_band(capture.fs))), 2)
     L = (capture.mics - capture.center).T
     X = stft(capture.audio)
     d = pra.doa.algorithms[method](L, capture.fs, NFFT, c=SPEED_OF_SOUND, num_src=n_sources, dim=3, n_grid=n_grid)

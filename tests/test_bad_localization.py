@@ -9,7 +9,7 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from localization import Capture, locate, place_sources, separate
+from localization import Capture, doa, locate, place_sources, separate
 from localization.capture import MAX_COORD_M
 from localization.locate import MAX_SOURCES, Votes
 from vrecho.device import MIC_ARRAYS, DevicePose
@@ -127,6 +127,9 @@ def test_checks_come_before_the_work():
         (lambda: separate(caps[0], 2, method="informed", positions=[["a", 0, 0], [0, 0, 0]]), "positions"),
         (lambda: separate(caps[0], 200, method="nmf"), "n_sources"),
         (lambda: separate(caps[0], None, method="nmf"), "n_sources"),
+        (lambda: doa(caps[0], 1, method="SRP", n_grid=1), "n_grid"),  # was qhull's error
+        (lambda: doa(caps[0], 1, method="TOPS", n_freq=1), "n_freq"),  # was pyroomacoustics' ValueError
+        (lambda: doa(caps[0], "2"), "n_sources"),
     ]
     for call, match in cases:
         t = time.perf_counter()
