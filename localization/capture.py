@@ -92,7 +92,10 @@ class Capture:
         self.fs = check_fs(self.fs)
         self.start_s = check_number(self.start_s, "capture.start_s")
         if isinstance(self.audio, (list, tuple)):
-            lengths = sorted({np.shape(c) for c in self.audio})
+            try:
+                lengths = {np.shape(c) for c in self.audio}
+            except ValueError:  # a ragged channel: _real_array says so
+                lengths = set()
             if len(lengths) > 1:
                 raise VrechoError(f"capture: channels of different lengths {[np.shape(c) for c in self.audio]}; "
                                   "every microphone must deliver the same samples")
