@@ -20,7 +20,7 @@ from tqdm import tqdm
 from vrecho.errors import VrechoError
 
 from .capture import Capture
-from .locate import Located, check_captures, doa, locate
+from .locate import MAX_SOURCES, Located, check_captures, check_count, doa, locate
 from .separate import SEPARATORS, separate, steering
 from .sources import PlacedSource
 
@@ -44,7 +44,10 @@ def place_sources(captures, n_sources: int | None = None, *, bounds=None, method
     captures : Capture or iterable of Capture
         The walk's captures, at one sample rate, each with at least 2 microphones.
     n_sources : int, optional
-        How many sources (None: the count is estimated).
+        The most sources: 1 to the fewest microphones a capture has (what a multichannel
+        method separates), and no more than :data:`localization.locate.MAX_SOURCES` (None: the
+        count is estimated, up to the same and 4). Fewer come back where fewer stand clear of
+        incoherent noise (:func:`locate`).
     bounds : tuple of two array_like [shape=(3,)], optional
         The search box's (low corner, high corner) in metres (:func:`locate`).
     method : str
@@ -58,20 +61,26 @@ def place_sources(captures, n_sources: int | None = None, *, bounds=None, method
     list of PlacedSource
         One per located source, named ``source_<i>``, its signal float32 at the captures' rate;
         ``confidence``: the source's share of the strongest source's map peak, in [0, 1];
-        ``uncertainty_m``: the position's standard error in metres (None where unknown).
+        ``uncertainty_m``: the position's standard error in metres (None where unknown). Empty
+        where no coherent source is heard (independent noise on each microphone).
 
     Raises
     ------
     VrechoError
-        For bad captures, a method that is not multichannel (checked before the work), or as
-        :func:`locate` and :func:`separate` do.
+        Before any work: for bad captures, a method that is not multichannel, an ``n_sources``
+        out of its range, or bad ``bounds``; after it, as :func:`separate` does.
     """
     captures = check_captures(captures)
     multichannel = [name for name, sep in SEPARATORS.items() if sep.multichannel]
-    if method not in multichannel:  # before the work
+    if not isinstance(method, str) or method not in multichannel:
         raise VrechoError(f"method: place_sources separates with {', '.join(multichannel)}, got {method!r}")
-    located = locate(captures, n_sources, bounds=bounds)
-    k = len(located.positions)  # separate refuses more sources than a capture has microphones
+    most = min(MAX_SOURCES, min(c.n_mics for c in captures))  # what every capture's separation takes
+    if n_sources is not None:
+        check_count(n_sources, "n_sources", most)
+    located = locate(captures, n_sources, bounds=bounds, max_sources=min(4, most))
+    k = len(located.positions)
+    if k == 0:  # nothing stands clear of the microphones' own noise
+        return []
     fs = captures[0].fs
     fade = int(CROSSFADE_S * fs)
     tracks = [np.zeros(0) for _ in range(k)]
@@ -100,6 +109,7 @@ def _order_by_direction(capture: Capture, y: np.ndarray, positions: np.ndarray) 
     spec = np.fft.rfft(capture.audio, axis=1)
     A = steering(capture, positions, np.fft.rfftfreq(n, 1 / capture.fs))  # (F, M, K)
     beams = np.fft.irfft(np.einsum("fmk,mf->kf", np.conj(A / np.abs(A)), spec) / capture.n_mics, n)
-    score = np.abs(np.corrcoef(np.vstack([beams, y]))[:len(positions), len(positions):])
+    with np.errstate(invalid="ignore", divide="ignore"):  # a silent output correlates with nothing
+        score = np.nan_to_num(np.abs(np.corrcoef(np.vstack([beams, y]))[:len(positions), len(positions):]))
     _, cols = linear_sum_assignment(-score)
     return cols

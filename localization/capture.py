@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vrecho.device import MIC_ARRAYS, DevicePose, MicArray
-from vrecho.errors import VrechoError
+from vrecho.errors import VrechoError, check_number
 from vrecho.signals import check_fs
 
 FS = 16_000
@@ -35,6 +35,12 @@ FS = 16_000
 
 
 SILENT_RMS = 1e-7
+MAX_SAMPLE = 1e12
+"""The largest sample magnitude a capture may hold: far beyond any audio format's full scale
+(int32's 2^31 included), and low enough that spectra's powers stay finite in single precision."""
+MAX_COORD_M = 1e6
+"""The farthest a world position (microphone, source, search box) may lie from the origin, in
+metres: a room's coordinates, with float64's millimetres to spare."""
 
 
 @dataclass
@@ -47,16 +53,19 @@ class Capture:
     Parameters
     ----------
     audio : numpy.ndarray [shape=(M, N)] or list of M 1-D arrays
-        The samples, one row per microphone; kept as float64. At least 0.25 s, finite, and no
-        channel silent (rms under 1e-7).
+        The samples, one row per microphone, of a real number type (integers or floats; not
+        bool, complex or text); kept as float64. At least one channel, at least 0.25 s (longer
+        than every STFT window localization uses), finite, within :data:`MAX_SAMPLE` of zero,
+        and no channel silent (rms under 1e-7).
     fs : int
         Sample rate in Hz, a whole number of at least 8000 (:data:`FS`, 16 kHz, is
         localization's own).
     mics : numpy.ndarray [shape=(M, 3)]
         The microphones' world positions in metres (vrecho's frame, Z up), one per channel,
-        finite and at least 1 mm apart; kept as float64.
+        finite, within :data:`MAX_COORD_M` of the origin and at least 1 mm apart; kept as
+        float64.
     start_s : float
-        When the stretch begins in the walk, in seconds (default 0).
+        When the stretch begins in the walk, in seconds (default 0), finite.
 
     Raises
     ------
@@ -81,27 +90,33 @@ class Capture:
 
     def __post_init__(self):
         self.fs = check_fs(self.fs)
+        self.start_s = check_number(self.start_s, "capture.start_s")
         if isinstance(self.audio, (list, tuple)):
-            lengths = sorted({np.asarray(c).shape for c in self.audio})
+            try:
+                lengths = {np.shape(c) for c in self.audio}
+            except ValueError:  # a ragged channel: _real_array says so
+                lengths = set()
             if len(lengths) > 1:
-                raise VrechoError(f"capture: channels of different lengths {[np.asarray(c).shape for c in self.audio]}; "
+                raise VrechoError(f"capture: channels of different lengths {[np.shape(c) for c in self.audio]}; "
                                   "every microphone must deliver the same samples")
-        audio = np.asarray(self.audio, dtype=np.float64)
-        if audio.ndim != 2:
-            raise VrechoError(f"capture: audio must be (channels, samples), got shape {audio.shape}")
+        audio = _real_array(self.audio, "capture.audio")
+        if audio.ndim != 2 or audio.shape[0] < 1:
+            raise VrechoError(f"capture.audio: must be (channels, samples) with at least one channel, got shape {audio.shape}")
         if self.mics is None:
             raise VrechoError("capture: unknown microphone geometry (mics is None); give the microphones' positions")
-        mics = np.asarray(self.mics, dtype=np.float64)
+        mics = _real_array(self.mics, "capture.mics")
         if mics.ndim != 2 or mics.shape[1] != 3 or len(mics) != len(audio):
             raise VrechoError(f"capture: mics must be ({len(audio)}, 3) positions, one per channel, got shape {mics.shape}")
-        if not np.all(np.isfinite(mics)):
-            raise VrechoError("capture: microphone positions must be finite")
+        if not np.all(np.isfinite(mics)) or np.max(np.abs(mics)) > MAX_COORD_M:
+            raise VrechoError(f"capture: microphone positions must be finite metres within {MAX_COORD_M:g} m of the origin")
         if len(mics) > 1 and np.min(_pair_distances(mics)) < 1e-3:
-            raise VrechoError("capture: two microphones at the same position")
-        if not np.all(np.isfinite(audio)):
-            raise VrechoError("capture: audio has NaN or infinite samples")
+            raise VrechoError("capture: two microphones at the same position (at least 1 mm apart)")
         if audio.shape[1] < int(0.25 * self.fs):
             raise VrechoError(f"capture: {audio.shape[1]} samples is under 0.25 s at {self.fs} Hz")
+        if not np.all(np.isfinite(audio)):
+            raise VrechoError("capture: audio has NaN or infinite samples")
+        if np.max(np.abs(audio)) > MAX_SAMPLE:
+            raise VrechoError(f"capture: audio samples must lie within +/- {MAX_SAMPLE:g}, got {np.max(np.abs(audio)):g}")
         rms = np.sqrt(np.mean(audio ** 2, axis=1))
         if np.any(rms < SILENT_RMS):
             raise VrechoError(f"capture: channel {int(np.argmax(rms < SILENT_RMS))} is silent: is that microphone connected?")
@@ -145,11 +160,30 @@ class Capture:
         VrechoError
             For an unknown array name, or as :class:`Capture` does.
         """
+        if not isinstance(pose, DevicePose):  # its checks make the rotation orthonormal
+            raise VrechoError(f"pose: expected a vrecho.device.DevicePose, got {type(pose).__name__}")
         if isinstance(array, str):
             if array not in MIC_ARRAYS:
                 raise VrechoError(f"array: expected one of {tuple(MIC_ARRAYS)}, got {array!r}")
             array = MIC_ARRAYS[array]
+        if not isinstance(array, MicArray):
+            raise VrechoError(f"array: expected a name in {tuple(MIC_ARRAYS)} or a MicArray, got {type(array).__name__}")
+        offsets = _real_array(array.offsets, f"array {array.name!r}: offsets")
+        if offsets.ndim != 2 or offsets.shape[1] != 3 or not np.all(np.isfinite(offsets)):
+            raise VrechoError(f"array {array.name!r}: offsets must be finite (forward, left, up) triples, got {array.offsets!r}")
         return cls(audio, fs, pose.microphones(array), start_s)
+
+
+def _real_array(x, where: str) -> np.ndarray:
+    """``x`` as a float64 array if it holds real numbers (integers or floats): bool, complex,
+    text and ragged nesting are refused rather than cast."""
+    try:
+        a = np.asarray(x)
+    except (TypeError, ValueError):
+        raise VrechoError(f"{where}: expected an array of numbers, got a ragged or mixed {type(x).__name__}") from None
+    if a.dtype.kind not in "iuf":
+        raise VrechoError(f"{where}: expected real numbers (integers or floats), got dtype {a.dtype}")
+    return a.astype(np.float64, copy=False)
 
 
 def _pair_distances(mics: np.ndarray) -> np.ndarray:

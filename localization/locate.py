@@ -17,6 +17,14 @@ Two ways, compared side by side in ``benchmarks/bench_localization.py``:
   comes from triangulating each capture's own best direction near it (least squares); the
   directions reported per capture point at the joint positions.
 
+Only a peak that stands clear of incoherent noise is a source (:meth:`Votes.null_peak`). Where
+the microphones hear independent noise, a bin's normalised beam power toward any direction is
+Beta(1, M - 1) distributed whatever the array's shape or the frequency, so the map's mean is
+known exactly (4 microphones: 0.006) and Chernoff's bound bounds how far the peak of a map of
+that many bins can rise above it by chance; a peak under that bound (one chance in a
+thousand of noise alone reaching it over the whole grid) is not a source, whatever the count
+asked for. Independent noise on every microphone thus gives no source.
+
 Positions are in the captures' world frame (metres); directions are unit vectors from each
 capture's array centre.
 """
@@ -26,18 +34,34 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
-from vrecho.errors import VrechoError
+from vrecho.errors import VrechoError, check_number
 from vrecho.signals import SPEED_OF_SOUND
 
-from .capture import Capture
+from .capture import MAX_COORD_M, Capture
 
 BAND_HZ = (200.0, 7000.0)
 NFFT = 512
 """STFT length for direction finding (32 ms at 16 kHz), hop NFFT / 2."""
 MIN_SEPARATION_M = 0.75
+MIN_RANGE_M = 0.05
+"""No source is sought closer than this to a capture's array centre: it has no direction there."""
+MAX_SOURCES = 8
+"""The most sources :func:`locate` seeks: past a handful the next peaks are the found sources'
+reflections and residue, not sources."""
+MAX_GRID_POINTS = 5_000_000
+"""The most points of the search grid (a 0.1 m grid over a box of 50 x 50 x 20 m): beyond it
+the maps would take gigabytes; a coarser ``step_m`` or tighter ``bounds`` keeps under it."""
+FALSE_ALARM = 1e-3
+"""The chance, over the whole search, that incoherent noise alone gives a source."""
+BIN_OVERLAP = 2.0
+"""How many onset bins count as one independent draw in the null bound: neighbouring frames
+overlap by half and neighbouring frequencies leak into each other through the Hann window."""
 ONSET_FRAMES = 3
 ONSET_RATIO = 2.0
+MAX_DOA_GRID = 100_000
+"""The most points of :func:`doa`'s sphere grid (0.7 degrees apart)."""
 PRA_METHODS: tuple[str, ...] = ("MUSIC", "NormMUSIC", "SRP", "CSSM", "WAVES", "TOPS")
 """pyroomacoustics' grid-based DOA methods (FRIDA works in the plane only)."""
 
@@ -51,8 +75,8 @@ class Located:
     positions : numpy.ndarray [shape=(K, 3)]
         World positions in metres.
     uncertainty_m : numpy.ndarray [shape=(K,)]
-        The standard error of each position in metres (NaN where fewer than three captures saw
-        it).
+        The standard error of each position in metres (``inf`` where it is unknown: fewer than
+        three captures, or all of them in line with the source).
     strength : numpy.ndarray [shape=(K,)]
         Each source's share of the map's peak power (the first is 1).
     directions : numpy.ndarray [shape=(captures, K, 3)]
@@ -85,7 +109,10 @@ def check_captures(captures) -> list[Capture]:
     """
     if isinstance(captures, Capture):
         captures = [captures]
-    captures = list(captures)
+    try:
+        captures = list(captures)
+    except TypeError:
+        raise VrechoError(f"captures: expected a Capture or an iterable of them, got {type(captures).__name__}") from None
     if not captures:
         raise VrechoError("captures: none given")
     for i, c in enumerate(captures):
@@ -165,25 +192,39 @@ def search_box(captures: list[Capture], *, bounds=None) -> tuple[np.ndarray, np.
     Raises
     ------
     VrechoError
-        For ``bounds`` that are not two finite 3-vectors with low < high on every axis.
+        For ``bounds`` that are not two finite 3-vectors within :data:`MAX_COORD_M` of the
+        origin with low < high on every axis.
     """
     if bounds is not None:
-        lo, hi = (np.asarray(b, dtype=float) for b in bounds)
-        if lo.shape != (3,) or hi.shape != (3,) or np.any(hi <= lo) or not np.all(np.isfinite([lo, hi])):
-            raise VrechoError(f"bounds: expected (low corner, high corner), each 3 finite numbers with low < high, got {bounds!r}")
+        try:
+            lo, hi = (np.asarray(b, dtype=float) for b in bounds)
+        except (TypeError, ValueError):
+            lo = hi = np.zeros(0)
+        if lo.shape != (3,) or hi.shape != (3,) or not np.all(np.isfinite([lo, hi])) or np.any(hi <= lo) \
+                or np.max(np.abs([lo, hi])) > MAX_COORD_M:
+            raise VrechoError(f"bounds: expected (low corner, high corner), each 3 finite numbers within {MAX_COORD_M:g} m "
+                              f"of the origin with low < high, got {bounds!r}")
         return lo, hi
     centers = np.array([c.center for c in captures])
     return centers.min(0) - np.array([4.0, 4.0, 2.0]), centers.max(0) + np.array([4.0, 4.0, 1.5])
 
 
-def _refine(maps, x: np.ndarray, lo, hi, step: float, away=()) -> np.ndarray:
-    """Climb from grid point ``x`` on ever finer grids, keeping ``MIN_SEPARATION_M`` from ``away``."""
+def _power(votes: "Votes", points: np.ndarray, found) -> np.ndarray:
+    """The world map at ``points``, ``-inf`` within ``MIN_SEPARATION_M`` of a source ``found``
+    and within ``MIN_RANGE_M`` of a capture's array centre."""
+    p = votes.power(points)
+    for y, r in [(y, MIN_SEPARATION_M) for y in found] + [(c.center, MIN_RANGE_M) for c in votes.captures]:
+        p[np.linalg.norm(points - y, axis=1) < r] = -np.inf
+    return p
+
+
+def _refine(votes: "Votes", x: np.ndarray, lo, hi, step: float, found=()) -> np.ndarray:
+    """Climb from grid point ``x`` on ever finer grids, where :func:`_power` allows."""
     for s in (step / 2, step / 4, step / 8, step / 16):
         pts = np.clip(grid_points(x - 2 * s, x + 2 * s, s), lo, hi)
-        p = maps.power(pts)
-        for y in away:
-            p[np.linalg.norm(pts - y, axis=1) < MIN_SEPARATION_M] = -np.inf
-        x = pts[int(np.argmax(p))]
+        p = _power(votes, pts, found)
+        if np.isfinite(p.max()):
+            x = pts[int(np.argmax(p))]
     return x
 
 
@@ -211,7 +252,8 @@ def triangulate(centers: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray
     x : numpy.ndarray [shape=(3,)]
         The point in metres.
     sigma : float
-        Its standard error in metres; NaN for fewer than three rays.
+        Its standard error in metres; ``inf`` (unknown) for fewer than three rays, or for rays
+        all parallel (no crossing: ``x`` is then their common line's point nearest the origin).
 
     Examples
     --------
@@ -225,9 +267,9 @@ def triangulate(centers: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray
     """
     P = np.eye(3)[None] - directions[:, :, None] * directions[:, None, :]
     A = P.sum(axis=0)
-    x = np.linalg.solve(A, np.einsum("nij,nj->i", P, centers))
-    if len(centers) < 3:
-        return x, float("nan")
+    x = np.linalg.lstsq(A, np.einsum("nij,nj->i", P, centers), rcond=1e-8)[0]
+    if len(centers) < 3 or np.linalg.cond(A) > 1e8:
+        return x, float("inf")
     resid = np.einsum("nij,nj->ni", P, x - centers)
     sigma2 = (resid ** 2).sum() / (2 * len(centers) - 3)
     return x, float(np.sqrt(np.trace(np.linalg.inv(A)) * sigma2))
@@ -307,6 +349,55 @@ class Votes:
     def _maps(self):
         self.maps = [(w @ v) / max(len(w), 1) for v, w in zip(self.votes, self.weights)]
 
+    def null_peak(self, n_points: int) -> float:
+        """The world map's value that incoherent noise reaches anywhere on ``n_points`` points
+        with a chance of at most :data:`FALSE_ALARM` (see the module's docstring).
+
+        Under independent noise on a capture's M microphones a bin's score s toward any
+        direction is Beta(1, M - 1) distributed, its vote V = s^GAMMA. The world map at a point
+        is X = sum over captures k of the mean of its n_k votes, over K; counting a capture's
+        bins as n_k / BIN_OVERLAP independent draws, Chernoff's bound with the votes' exact
+        moment generating function, P(X >= t) <= exp(log E[exp(lam X)] - lam t) for every
+        lam > 0, and a union bound over the points give the smallest t whose chance is under
+        FALSE_ALARM / n_points. Unequal levels on the microphones, or noise with more of its
+        power at some frequencies, give less.
+
+        Parameters
+        ----------
+        n_points : int
+            How many points the search looks at.
+
+        Returns
+        -------
+        float
+            The map's value; ``inf`` where no capture has a voting bin.
+        """
+        k = len(self.captures)
+        n = np.array([len(w) / BIN_OVERLAP for w in self.weights])
+        m = np.array([c.n_mics for c in self.captures])[n > 0]
+        n = n[n > 0]
+        if not len(n):
+            return float("inf")
+        # Beta(1, M - 1) on s = 1 - u: density (M - 1) u^(M - 2), nodes dense near u = 0 where
+        # e^(theta s^GAMMA) peaks; trapezoid weights on the geometric nodes
+        u = np.concatenate([[0.0], np.geomspace(1e-9, 1.0, 3000)])
+        du = np.diff(u)
+        w = np.concatenate([[du[0] / 2], (du[:-1] + du[1:]) / 2, [du[-1] / 2]])
+        log_density = np.log(m[:, None] - 1.0) + (m[:, None] - 2.0) * np.log(np.maximum(u, 1e-300)) + np.log(w)
+        log_density[:, 0] = np.where(m == 2, np.log(w[0]), -np.inf)  # u^0 = 1 at u = 0 only for M = 2
+        v = (1.0 - u) ** self.GAMMA
+
+        def log_mgf(lam: float) -> float:  # log E[exp(lam X)], X the map at one point
+            theta = lam / (k * n)
+            e = log_density + theta[:, None] * v
+            top = e.max(axis=1)
+            return float(np.sum(n * (top + np.log(np.exp(e - top[:, None]).sum(axis=1)))))
+
+        log_p = np.log(max(n_points, 1) / FALSE_ALARM)
+        best = minimize_scalar(lambda r: (log_mgf(np.exp(r)) + log_p) / np.exp(r), bounds=(-5.0, 25.0),
+                               method="bounded", options={"xatol": 1e-4})
+        return float(min(best.fun, 1.0))
+
     def lookup(self, k: int, u: np.ndarray) -> np.ndarray:
         """Capture ``k``'s map toward unit vectors, bilinear in azimuth and elevation.
 
@@ -377,45 +468,55 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
     captures : Capture or iterable of Capture
         The walk's captures, at one sample rate, each with at least 2 microphones.
     n_sources : int, optional
-        How many to find (None: estimated, at most ``max_sources``; a next peak weaker than
-        ``min_strength`` times the first is not a source).
+        The most sources to find, 1 to :data:`MAX_SOURCES` (None: estimated, at most
+        ``max_sources``; a next peak weaker than ``min_strength`` times the first is not a
+        source). Fewer come back where fewer peaks stand clear of incoherent noise.
     bounds : tuple of two array_like [shape=(3,)], optional
         The search box's (low corner, high corner) in metres (:func:`search_box`).
     step_m : float
-        The search grid's spacing in metres (default 0.1), before refinement.
+        The search grid's spacing in metres, 0.01 to 1 (default 0.1), before refinement.
     max_sources : int
-        The most sources an estimated count gives (default 4).
+        The most sources an estimated count gives, 1 to :data:`MAX_SOURCES` (default 4).
     min_strength : float
-        The share of the first source's map peak below which an estimated count stops (default
-        0.25).
+        The share of the first source's map peak below which an estimated count stops, 0 to 1
+        (default 0.25).
 
     Returns
     -------
     Located
-        The positions, their standard errors, strengths and directions from each capture.
+        The positions, their standard errors, strengths and directions from each capture; no
+        source at all (K = 0) where no peak stands clear of incoherent noise (the module's
+        docstring).
 
     Raises
     ------
     VrechoError
-        For bad captures (:func:`check_captures`), an ``n_sources`` that is not a positive whole
-        number or None, or bad ``bounds``.
+        Before any work: for bad captures (:func:`check_captures`), an ``n_sources`` that is
+        neither None nor a whole number from 1 to :data:`MAX_SOURCES`, bad ``bounds``, a
+        ``step_m``, ``max_sources`` or ``min_strength`` out of its range, or a search grid of
+        more than :data:`MAX_GRID_POINTS` points.
     """
     captures = check_captures(captures)
-    if n_sources is not None and (isinstance(n_sources, bool) or not isinstance(n_sources, (int, np.integer))
-                                  or n_sources < 1):
-        raise VrechoError(f"n_sources: expected a positive whole number or None, got {n_sources!r}")
+    if n_sources is not None:
+        check_count(n_sources, "n_sources", MAX_SOURCES)
+    check_count(max_sources, "max_sources", MAX_SOURCES)
+    min_strength = check_number(min_strength, "min_strength", lo=0.0, hi=1.0)
+    step_m = check_number(step_m, "step_m", lo=0.01, hi=1.0)
     lo, hi = search_box(captures, bounds=bounds)
+    n_points = int(np.prod(np.floor((hi - lo) / step_m + 1e-9) + 1))
+    if n_points > MAX_GRID_POINTS:
+        raise VrechoError(f"step_m: a {step_m} m grid over the box {lo.tolist()} to {hi.tolist()} m has {n_points:,} points "
+                          f"(at most {MAX_GRID_POINTS:,}): give a coarser step_m or tighter bounds")
     grid = grid_points(lo, hi, step_m)
     votes = Votes(captures)
     every_vote = votes.maps  # kept for each capture's own direction once the sources are found
+    floor = votes.null_peak(len(grid))
     found, strength = [], []
     limit = n_sources or max_sources
     while len(found) < limit:
-        p = votes.power(grid)
-        for x in found:  # two sources closer than this are one to this array
-            p[np.linalg.norm(grid - x, axis=1) < MIN_SEPARATION_M] = -np.inf
+        p = _power(votes, grid, found)  # two sources closer than MIN_SEPARATION_M are one to this array
         best = int(np.argmax(p))
-        if n_sources is None and found and p[best] < min_strength * strength[0]:
+        if not p[best] > floor or (n_sources is None and found and p[best] < min_strength * strength[0]):
             break
         x = _refine(votes, grid[best], lo, hi, step_m, found)
         found.append(x)
@@ -424,14 +525,41 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
     votes.maps = every_vote
     centers = np.array([c.center for c in captures])
     positions = np.array(found).reshape(-1, 3)
-    unc = np.full(len(found), np.nan)
+    unc = np.full(len(found), np.inf)
     if len(captures) >= 3:
         sphere = _sphere(40000)
         for i, x in enumerate(positions):
             rays = np.array([_pose_direction(votes, k, x, sphere) for k in range(len(captures))])
             unc[i] = triangulate(centers, rays)[1]
     d = positions[None] - centers[:, None]
-    return Located(positions, unc, np.array(strength) / strength[0], d / np.linalg.norm(d, axis=-1, keepdims=True))
+    return Located(positions, unc, np.array(strength) / max(strength[:1], default=1.0),
+                   d / np.linalg.norm(d, axis=-1, keepdims=True))
+
+
+def check_count(n, where: str, hi: int, lo: int = 1) -> int:
+    """``n`` as an int if it is a whole number from ``lo`` to ``hi`` (not a bool).
+
+    Parameters
+    ----------
+    n : object
+        The value given.
+    where : str
+        The argument's name, which errors name.
+    hi, lo : int
+        The largest and the smallest allowed (``lo`` 1 by default).
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    VrechoError
+        Naming ``where`` and the allowed range, for anything else.
+    """
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not lo <= n <= hi:
+        raise VrechoError(f"{where}: expected a whole number from {lo} to {hi}, got {n!r}")
+    return int(n)
 
 
 def doa(capture: Capture, n_sources: int, *, method: str = "NormMUSIC", n_grid: int = 6000,
@@ -443,15 +571,17 @@ def doa(capture: Capture, n_sources: int, *, method: str = "NormMUSIC", n_grid: 
     capture : Capture
         The capture, with at least 2 microphones.
     n_sources : int
-        How many directions to give; MUSIC, NormMUSIC, CSSM, WAVES and TOPS find fewer sources
-        than microphones.
+        How many directions to give, 1 to :data:`MAX_SOURCES`; MUSIC, NormMUSIC, CSSM, WAVES
+        and TOPS find fewer sources than microphones.
     method : str
         One of :data:`PRA_METHODS` (default "NormMUSIC").
     n_grid : int
-        The number of points of the sphere grid searched (default 6000).
+        The number of points of the sphere grid searched, 100 to :data:`MAX_DOA_GRID` (default
+        6000).
     n_freq : int, optional
-        Use only that many frequency bins, evenly spread over the band :data:`BAND_HZ` (CSSM,
-        WAVES and TOPS take about 20 s per capture on all of them); None: the whole band.
+        Use only that many frequency bins (2 to the band's), evenly spread over the band
+        :data:`BAND_HZ` (CSSM, WAVES and TOPS take about 20 s per capture on all of them);
+        None: the whole band.
 
     Returns
     -------
@@ -462,16 +592,23 @@ def doa(capture: Capture, n_sources: int, *, method: str = "NormMUSIC", n_grid: 
     Raises
     ------
     VrechoError
-        For a bad capture, an unknown method, or too many sources for the method.
+        For a bad capture, an unknown method, an ``n_sources``, ``n_grid`` or ``n_freq`` out of
+        its range, or too many sources for the method.
     """
     import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
 
+    if not isinstance(capture, Capture):
+        raise VrechoError(f"capture: expected a localization.Capture, got {type(capture).__name__}")
     (capture,) = check_captures([capture])
     if method not in PRA_METHODS:
         raise VrechoError(f"method: expected one of {PRA_METHODS}, got {method!r}")
+    check_count(n_sources, "n_sources", MAX_SOURCES)
     if method in ("MUSIC", "NormMUSIC", "CSSM", "WAVES", "TOPS") and n_sources >= capture.n_mics:
         raise VrechoError(f"{method} finds fewer sources than microphones: {n_sources} sources with "
                           f"{capture.n_mics} microphones")
+    check_count(n_grid, "n_grid", MAX_DOA_GRID, 100)
+    if n_freq is not None:  # TOPS, CSSM and WAVES fail on a single frequency
+        check_count(n_freq, "n_freq", int(np.sum(_band(capture.fs))), 2)
     L = (capture.mics - capture.center).T
     X = stft(capture.audio)
     d = pra.doa.algorithms[method](L, capture.fs, NFFT, c=SPEED_OF_SOUND, num_src=n_sources, dim=3, n_grid=n_grid)

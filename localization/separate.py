@@ -34,12 +34,20 @@ from vrecho.errors import VrechoError
 from vrecho.signals import SPEED_OF_SOUND
 
 from . import masknet
-from .capture import Capture
+from .capture import MAX_COORD_M, Capture
+from .locate import MAX_SOURCES, check_count
 
 BLIND_FRAME_S = 0.016
 """STFT frame of blind separation: 16 ms (256 points at 16 kHz). A capture of 1.5 s then gives
 the blind methods some 370 frames to learn their demixing from; 128 ms frames (as long as the
 rooms' reverberation) left them 47 and lost 2 to 4 dB SDR on the tuning rooms (seed 7700)."""
+
+
+MIN_DISTANCE_M = 0.01
+"""The nearest a source is taken to be to a microphone in the steering model: a source closer
+than 1 cm (or on the microphone) is heard as from 1 cm, so its gain stays finite."""
+MAX_ITER = 10_000
+"""The most iterations ``n_iter`` may ask of the blind methods and NMF."""
 
 
 def _blind_nfft(fs: int) -> int:
@@ -133,10 +141,7 @@ def _ilrma(capture: Capture, X: np.ndarray, k: int, n_iter: int) -> np.ndarray:
     import pyroomacoustics as pra  # heavy (1.4 s to import): only separation needs it here
 
     far = np.argsort(np.linalg.norm(capture.mics - capture.mics[0], axis=1))[::-1][:k - 1]
-    try:
-        return pra.bss.ilrma(X[:, :, np.r_[0, np.sort(far)]], n_src=k, n_iter=n_iter, proj_back=True)
-    except np.linalg.LinAlgError:
-        raise VrechoError("ilrma: the demixing matrix became singular (try auxiva or informed)") from None
+    return pra.bss.ilrma(X[:, :, np.r_[0, np.sort(far)]], n_src=k, n_iter=n_iter, proj_back=True)
 
 
 def _fastmnmf(capture: Capture, X: np.ndarray, k: int, n_iter: int) -> np.ndarray:
@@ -154,17 +159,20 @@ def separate(capture: Capture, n_sources: int, *, method: str = "informed", posi
     capture : Capture
         The recording.
     n_sources : int
-        How many sources; a multichannel method separates at most as many as the capture has
-        microphones.
+        How many sources, 1 to the capture's microphones or
+        :data:`localization.locate.MAX_SOURCES` if more; a multichannel method separates at most
+        as many as the capture has microphones.
     method : str
         One of :data:`METHODS`: "auxiva", "ilrma", "fastmnmf", "nmf" or "informed" (the
         default).
     positions : array_like [shape=(n_sources, 3)], optional
-        The sources' world positions in metres (:func:`localization.locate`); needed by
-        ``informed``, which returns the sources in their order.
+        The sources' world positions in metres (:func:`localization.locate`), finite and within
+        :data:`localization.capture.MAX_COORD_M` of the origin; needed by ``informed``, which
+        returns the sources in their order. A position within :data:`MIN_DISTANCE_M` of a
+        microphone (or on it) is taken as that far from it.
     n_iter : int, optional
-        The iterations of the blind methods and NMF (None: 50 and 200; informed separation has
-        none).
+        The iterations of the blind methods and NMF, 1 to :data:`MAX_ITER` (None: 50 and 200;
+        informed separation has none).
 
     Returns
     -------
@@ -174,29 +182,40 @@ def separate(capture: Capture, n_sources: int, *, method: str = "informed", posi
     Raises
     ------
     VrechoError
-        For a ``capture`` that is not a :class:`Capture`, an unknown method, an ``n_sources``
-        that is not a positive whole number or exceeds a multichannel method's microphones,
-        missing or bad ``positions`` for ``informed``, or (ilrma) a demixing matrix that became
-        singular.
+        Before any work: for a ``capture`` that is not a :class:`Capture`, an unknown method, an
+        ``n_sources`` that is not a positive whole number or exceeds the method's limit, an
+        ``n_iter`` out of its range, missing or bad ``positions`` for ``informed``. After it: a
+        method whose demixing became singular or gave non-finite samples (no NaN is returned).
     """
     if not isinstance(capture, Capture):
         raise VrechoError(f"capture: expected a localization.Capture, got {type(capture).__name__}")
-    if method not in SEPARATORS:
+    if not isinstance(method, str) or method not in SEPARATORS:
         raise VrechoError(f"method: expected one of {METHODS}, got {method!r}")
-    if isinstance(n_sources, bool) or not isinstance(n_sources, (int, np.integer)) or n_sources < 1:
-        raise VrechoError(f"n_sources: expected a positive whole number, got {n_sources!r}")
     separator = SEPARATORS[method]
     m = capture.n_mics
+    n_sources = check_count(n_sources, "n_sources", max(m, MAX_SOURCES))
     if separator.multichannel and n_sources > m:
         raise VrechoError(f"{method} separates at most as many sources as microphones: {n_sources} sources, "
                           f"{m} microphone{'s' if m > 1 else ''} (use method='nmf' for one channel)")
+    if n_iter is not None:
+        check_count(n_iter, "n_iter", MAX_ITER)
     if separator.informed:
         if positions is None:
             raise VrechoError("informed separation needs the sources' positions (localization.locate)")
-        positions = np.asarray(positions, dtype=float)
-        if positions.shape != (n_sources, 3) or not np.all(np.isfinite(positions)):
-            raise VrechoError(f"positions: expected ({n_sources}, 3) finite positions, got shape {positions.shape}")
-    return separator.run(capture, n_sources, positions, n_iter)
+        try:
+            positions = np.asarray(positions, dtype=float)
+        except (TypeError, ValueError):
+            raise VrechoError(f"positions: expected ({n_sources}, 3) numbers, got {positions!r}") from None
+        if positions.shape != (n_sources, 3) or not np.all(np.isfinite(positions)) or np.max(np.abs(positions)) > MAX_COORD_M:
+            raise VrechoError(f"positions: expected ({n_sources}, 3) finite positions within {MAX_COORD_M:g} m of the "
+                              f"origin, got shape {positions.shape}")
+    try:
+        y = separator.run(capture, n_sources, positions, n_iter)
+    except np.linalg.LinAlgError:
+        raise VrechoError(f"{method}: the demixing became singular on this capture (try another method)") from None
+    if not np.all(np.isfinite(y)):
+        raise VrechoError(f"{method}: separation diverged on this capture (non-finite samples; try another method)")
+    return y
 
 
 def steering(capture: Capture, positions: np.ndarray, freqs: np.ndarray) -> np.ndarray:
@@ -214,10 +233,11 @@ def steering(capture: Capture, positions: np.ndarray, freqs: np.ndarray) -> np.n
     Returns
     -------
     numpy.ndarray [shape=(F, M, K), dtype=complex128]
-        Each microphone's gain (distance ratio to microphone 0's) and phase (delay relative to
-        microphone 0's) for each source; microphone 0's entries are 1.
+        Each microphone's gain (distance ratio to microphone 0's, distances no shorter than
+        :data:`MIN_DISTANCE_M`) and phase (delay relative to microphone 0's) for each source;
+        microphone 0's entries are 1.
     """
-    dist = np.linalg.norm(capture.mics[None] - positions[:, None], axis=-1).T  # (M, K)
+    dist = np.maximum(np.linalg.norm(capture.mics[None] - positions[:, None], axis=-1).T, MIN_DISTANCE_M)  # (M, K)
     rel = dist - dist[:1]
     return (dist[:1] / dist)[None] * np.exp(-2j * np.pi * freqs[:, None, None] * rel[None] / SPEED_OF_SOUND)
 
