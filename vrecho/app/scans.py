@@ -244,6 +244,8 @@ def _heard(source: Source, seed: int, progress: bool) -> list:
     """The scene's sources heard by the headset along its walkthrough, located and separated."""
     sim = source.truth.captures(np.random.default_rng(seed))
     placed = localization.place_sources(sim.captures, bounds=source.scene.room.box, progress=progress)
+    if not placed:
+        print("  no source heard: none stands clear of the microphones' own noise")
     for p in placed:
         err = min(np.linalg.norm(p.position - s.position) for s in sim.sources)
         print(f"  {p.name} at {np.round(p.position, 2).tolist()} m (+/- {p.uncertainty_m or float('nan'):.2f} m, "
