@@ -4,7 +4,8 @@ Each case runs in a process of its own (forked from one that has imported vrecho
 crash or a hang is seen as such and costs one case), and gets one outcome:
 
 - ``error``: one :class:`~vrecho.errors.VrechoError` (a command: exit 2 and one line on stderr);
-- ``flagged``: an answer that says it is unsure (low confidence, a flag, no source found);
+- ``flagged``: an answer that says it is unsure (low confidence, a flag, no source found), or
+  an answer where the input, odd as it is, is valid (a quad face, PCM samples);
 - failures: ``traceback`` (any other exception, or more than one line from a command),
   ``crash`` (killed by a signal), ``hang`` (past the time limit), ``confident`` (a confident
   answer to input that carries none), ``nan`` (NaN in an answer), ``answered`` (a command or
@@ -76,6 +77,21 @@ def finite_signal(y) -> str:
     return "flagged" if _finite(y) else "nan"
 
 
+def flagged_rows(out: Path, flag: str) -> str:
+    """A capture's frames.csv: every row flagged ``flag`` and at most 0.5 confident."""
+    import csv
+
+    with open(out / "frames.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    ok = rows and all(flag in r["flags"] and float(r["confidence"]) <= 0.5 for r in rows)
+    return "flagged" if ok else "confident"
+
+
+def any_finite_prediction(p) -> str:
+    """A valid input (PCM samples): any answer without NaN will do."""
+    return "flagged" if unsure_prediction(p) != "nan" else "nan"
+
+
 def probe_written(out) -> str:
     """The monitor's speaker buffer: the probe written (finite, not all silent), or the call refused."""
     a = np.asarray(out, dtype=float)
@@ -119,7 +135,7 @@ def _child(case: Case, conn) -> None:
                         and (len(lines) == 1 or lines[0].startswith("usage:")):
                     outcome = ("error", lines[-1][:160])
                 elif rc == 0:
-                    outcome = ("answered", "exit 0")
+                    outcome = (case.judge(), "exit 0") if case.judge else ("answered", "exit 0")
                 else:
                     outcome = ("traceback", f"exit {rc}: " + " | ".join(lines[-3:])[:300])
             else:
@@ -307,7 +323,8 @@ def mesh_cases(base: Path, m: dict) -> list[Case]:
     cases = []
     for name, text in meshes.items():
         path = _write(base / "meshes" / f"{len(cases)}.ply", text)
-        cases.append(Case("meshes", f"read_mesh: {name}", lambda p=path: read_mesh(p)))
+        valid = (lambda mesh: "flagged") if name == "a quad face" else None  # a valid polygon, split in two
+        cases.append(Case("meshes", f"read_mesh: {name}", lambda p=path: read_mesh(p), valid))
     objs = {"obj index out of range": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99\n",
             "obj negative beyond": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -9\n",
             "obj NaN vertex": "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "obj no faces": "v 0 0 0\n",
@@ -385,7 +402,8 @@ def colmap_cases(base: Path, m: dict) -> list[Case]:
             _write(folder / "cameras.txt", c)
         if im is not None:
             _write(folder / "images.txt", im)
-        cases.append(Case("COLMAP", f"read_poses: {name}", lambda f=folder: read_poses(f, 4.0, 6.5)))
+        valid = (lambda poses: "flagged") if name == "two cameras" else None  # the second one is used by no picture
+        cases.append(Case("COLMAP", f"read_poses: {name}", lambda f=folder: read_poses(f, 4.0, 6.5), valid))
         if i % 4 == 0:
             out = base / "outs" / f"colmap{i}"
             cases.append(Case("COLMAP", f"vrecho capture --poses: {name}",
@@ -417,7 +435,8 @@ def audio_cases(base: Path, m: dict) -> list[Case]:
               "object": np.array([None] * 10, dtype=object), "strings": np.array(["a"] * 10),
               "a list of strings": ["a", "b"], "1e308 samples": np.full(fs, 1e308), "10 samples": one[:10],
               "an hour": np.zeros(3600 * 44100, dtype=np.float32)}
-    cases = [Case("recordings", f"predict: {k}", predict(a, fs), unsure_prediction) for k, a in arrays.items()]
+    cases = [Case("recordings", f"predict: {k}", predict(a, fs), any_finite_prediction if k == "int16" else
+                  unsure_prediction) for k, a in arrays.items()]
     for r in (0, -44100, 44100.5, 1e9, 10**12, "44100", None, True, 8000, 11025):
         judge = unsure_prediction if r in (8000, 11025) else None
         audio = one[:: 44100 // int(r)] if r in (8000, 11025) else one
@@ -451,10 +470,11 @@ def audio_cases(base: Path, m: dict) -> list[Case]:
         if name in ("white noise", "speech-like bursts", "silence", "noise bursts", "a sine"):
             cases.append(Case("recordings", f"find_onsets: {name}", lambda a=a, r=r: find_onsets(a, r)))
         out = base / "outs" / f"wav{i}"
-        flag = name in ("the capture at 8 kHz", "the capture clipped on 10 %")
+        flag = {"the capture at 8 kHz": "low_rate", "the capture clipped on 10 %": "clipped"}.get(name)
         cases.append(Case("recordings", f"vrecho capture --audio: {name}", ["capture", "--audio", str(wav), "--out",
                                                                           str(out), "--quiet"],
-                          judge=None, out=None if flag else out))
+                          judge=(lambda out=out, flag=flag: flagged_rows(out, flag)) if flag else None,
+                          out=None if flag else out))
     for name, data in {"text as WAV": b"hello", "WAV header only": open(m["wav"], "rb").read()[:44],
                        "truncated WAV": open(m["wav"], "rb").read()[:5000],
                        "truncated video": (m["capture"] / "capture.mkv").read_bytes()[:20000],

@@ -511,6 +511,14 @@ def write_scene(path: str | Path, mesh, surfaces=(), sources=(), *, check: bool 
         os.replace(stage_path, path)
     except OSError as e:
         raise VrechoError(f"export: writing {path} failed ({e.strerror or e}); nothing written") from None
+    except Exception as e:  # OpenUSD's own Tf.ErrorException: how its writer reports a full disk
+        from pxr import Tf
+
+        if not isinstance(e, Tf.ErrorException):
+            raise
+        found = re.search(r"writing file: ([^'\n]+)", str(e))
+        why = found.group(1).strip() if found else "OpenUSD could not write it"
+        raise VrechoError(f"export: writing {path} failed ({why}); nothing written") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return path

@@ -89,7 +89,10 @@ def check_frames(audio, fs) -> np.ndarray:
         a frame is not 1 s long, or a sample is NaN or infinite.
     """
     fs = check_fs(fs)
-    x = np.asarray(audio)
+    try:
+        x = np.asarray(audio)
+    except (ValueError, TypeError):  # ragged lists: frames of different lengths
+        raise VrechoError("audio: expected a frame or frames of one length (an array), got ragged sequences") from None
     if x.dtype.kind not in "fiu" or x.ndim not in (1, 2):
         raise VrechoError(f"audio: expected a 1-D frame or a 2-D batch of frames of numbers, got shape {x.shape} ({x.dtype})")
     n = int(round(FRAME_S * fs))
@@ -142,7 +145,12 @@ def check_emitted(emitted, fs, n_frames: int | None = None) -> np.ndarray:
         zero).
     """
     fs = check_fs(fs)
-    s = np.asarray(emitted)
+    try:
+        s = np.asarray(emitted)
+    except (ValueError, TypeError):
+        raise VrechoError("emitted: expected a sound or sounds of one length (an array), got ragged sequences") from None
+    if s.size == 0:
+        raise VrechoError("emitted: expected at least one sample, got none")
     if s.dtype.kind not in "fiu" or s.ndim not in (1, 2) or (s.ndim == 2 and len(s) != n_frames):
         per_frame = "" if n_frames is None else f" or one per frame ({n_frames}, k)"
         raise VrechoError(f"emitted: expected one sound (k,){per_frame}, got shape {s.shape}")

@@ -178,7 +178,10 @@ def mic_geometry(mic_offset_m) -> tuple[float, float]:
     >>> mic_geometry(0.07), mic_geometry((0.03, 0.0, 0.04))
     ((0.07, 0.0), (0.05, 0.03))
     """
-    o = np.atleast_1d(np.asarray(mic_offset_m, float))
+    try:
+        o = np.atleast_1d(np.asarray(mic_offset_m, float))
+    except (ValueError, TypeError):
+        raise VrechoError(f"mic_offset_m: expected metres (a number, or 3 numbers), got {mic_offset_m!r}") from None
     if o.shape not in ((1,), (3,)) or not np.all(np.isfinite(o)):
         raise VrechoError(f"mic_offset_m: expected metres, or (forward, left, up) in metres, got {mic_offset_m!r}")
     s = float(np.linalg.norm(o))
