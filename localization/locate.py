@@ -17,7 +17,9 @@ Two ways, compared side by side in ``benchmarks/bench_localization.py``:
   comes from triangulating each capture's own best direction near it (least squares); the
   directions reported per capture point at the joint positions.
 
-Only a peak that stands clear of incoherent noise is a source (:meth:`Votes.null_peak`). Where
+The strongest peak must stand clear of incoherent noise (:meth:`Votes.null_peak`), or there is
+no source at all; later peaks are judged against it as above (the bound is the whole map's, and
+the maps a found source has explained are thinner). Where
 the microphones hear independent noise, a bin's normalised beam power toward any direction is
 Beta(1, M - 1) distributed whatever the array's shape or the frequency, so the map's mean is
 known exactly (4 microphones: 0.006) and Chernoff's bound bounds how far the peak of a map of
@@ -516,7 +518,9 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
     while len(found) < limit:
         p = _power(votes, grid, found)  # two sources closer than MIN_SEPARATION_M are one to this array
         best = int(np.argmax(p))
-        if not p[best] > floor or (n_sources is None and found and p[best] < min_strength * strength[0]):
+        # The strongest peak must stand clear of incoherent noise; later ones are judged against it, on
+        # maps that explain() has thinned (the floor, made for the whole map, is not theirs)
+        if (not found and not p[best] > floor) or (n_sources is None and found and p[best] < min_strength * strength[0]):
             break
         x = _refine(votes, grid[best], lo, hi, step_m, found)
         found.append(x)
