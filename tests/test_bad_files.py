@@ -190,6 +190,8 @@ def model(folder, cameras=GOOD_CAMERAS, images=GOOD_IMAGES):
     (GOOD_CAMERAS, "1 1 0 0 0 0 0 0 1 a1.png\nthis line is junk\n", "line 2: cannot read"),
     (GOOD_CAMERAS, "1 1 0 0 0 0 0 0 1 a\x01.png\n", "control characters"),
     (GOOD_CAMERAS, "\x00" * 64, "line 1: cannot read"),
+    # an image line that lost a field looks like a points line: refused where no header precedes it
+    (GOOD_CAMERAS, "1 1 0 0 0 0 0 0 1 a1.png\n\n2 1 0 0 0 0 0 0 a2.png\n\n", "line 3: cannot read"),
 ])
 def test_bad_colmap_models_name_the_file_and_line(tmp_path, cameras, images, message):
     folder = model(tmp_path / "m", cameras, images)

@@ -512,7 +512,7 @@ def write_scene(path: str | Path, mesh, surfaces=(), sources=(), *, check: bool 
     except OSError as e:
         raise VrechoError(f"export: writing {path} failed ({e.strerror or e}); nothing written") from None
     except Exception as e:  # OpenUSD's own Tf.ErrorException: how its writer reports a full disk
-        from pxr import Tf
+        from pxr import Tf  # OpenUSD: already loaded by the write that failed
 
         if not isinstance(e, Tf.ErrorException):
             raise

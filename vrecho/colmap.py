@@ -160,8 +160,8 @@ def read_model(folder: str | Path) -> tuple[dict[int, Camera], list[Image]]:
     images in the file's order.
 
     Lines starting with ``#`` are comments; in ``images.txt`` only lines of exactly ten fields
-    are read as image headers, and lines of a multiple of three (an image's 2-D points, or
-    none) are skipped unread.
+    are read as image headers, and lines of a multiple of three right after a header (an image's
+    2-D points, or none) are skipped unread; such a line anywhere else is refused.
 
     Parameters
     ----------
@@ -214,14 +214,18 @@ def read_model(folder: str | Path) -> tuple[dict[int, Camera], list[Image]]:
                               f"{np.diag(cam.intrinsics)[:2].tolist()}")
         cameras[cid] = cam
     images, ids, names = [], set(), set()
-    # An image's header has exactly ten fields; its points line has a multiple of three (or none).
+    # An image's header has exactly ten fields; its points line, right after it, a multiple of three
+    # (or none): a line of points anywhere else is a header that lost fields, not to be skipped.
+    after_header = False
     for n, line in _lines(folder / "images.txt"):
         where, t = f"poses: {folder / 'images.txt'}, line {n}", line.split()
         if len(t) != 10:
-            if len(t) % 3:
+            if len(t) % 3 or (t and not after_header):
                 raise VrechoError(f"{where}: cannot read {line[:80]!r}; expected IMAGE_ID QW QX QY QZ TX TY TZ "
-                                  "CAMERA_ID NAME, or the image's 2-D points (X Y POINT3D_ID ...)")
+                                  "CAMERA_ID NAME, or on the line after it the image's 2-D points (X Y POINT3D_ID ..)")
+            after_header = False
             continue
+        after_header = True
         iid, cid, name = _whole(t[0], f"{where}, IMAGE_ID"), _whole(t[8], f"{where}, CAMERA_ID"), t[9]
         q, tr = _numbers(t[1:5], f"{where}, QW QX QY QZ"), _numbers(t[5:8], f"{where}, TX TY TZ")
         if cid not in cameras:
