@@ -98,7 +98,9 @@ def test_interrupted_generation_says_one_line(tmp_path):
     """Ctrl-C reaches the whole process group: the driver says one line, no worker a traceback."""
     p = subprocess.Popen([sys.executable, "-m", "vrecho", "generate", "--out", str(tmp_path / "ds"), "--workers", "2",
                           "--preset", "default", "--cache", str(tmp_path / "cache"), "--quiet"],
-                         stderr=subprocess.PIPE, text=True, start_new_session=True)
+                         stderr=subprocess.PIPE, text=True, start_new_session=True,
+                         # as a terminal starts it: a shell's background job (CI) inherits SIGINT ignored
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.time() + 300
     while not list((tmp_path / "ds").glob("progress/scene_*.csv")) and time.time() < deadline:
         time.sleep(0.1)  # until a room is finished: the workers are at work (the tiny preset's six rooms can all
