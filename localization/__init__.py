@@ -17,10 +17,10 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from tqdm import tqdm
 
-from vrecho.errors import VrechoError
+from vrecho.errors import VrechoError, check_count
 
 from .capture import Capture
-from .locate import MAX_SOURCES, Located, check_captures, check_count, doa, locate
+from .locate import MAX_SOURCES, Located, check_captures, doa, locate
 from .separate import SEPARATORS, separate, steering
 from .sources import PlacedSource
 

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from vrecho.errors import VrechoError, check_number
+from vrecho.errors import VrechoError, check_count, check_number
 from vrecho.signals import SPEED_OF_SOUND
 
 from .capture import MAX_COORD_M, Capture
@@ -538,32 +538,6 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
     d = positions[None] - centers[:, None]
     return Located(positions, unc, np.array(strength) / max(strength[:1], default=1.0),
                    d / np.linalg.norm(d, axis=-1, keepdims=True))
-
-
-def check_count(n, where: str, hi: int, lo: int = 1) -> int:
-    """``n`` as an int if it is a whole number from ``lo`` to ``hi`` (not a bool).
-
-    Parameters
-    ----------
-    n : object
-        The value given.
-    where : str
-        The argument's name, which errors name.
-    hi, lo : int
-        The largest and the smallest allowed (``lo`` 1 by default).
-
-    Returns
-    -------
-    int
-
-    Raises
-    ------
-    VrechoError
-        Naming ``where`` and the allowed range, for anything else.
-    """
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not lo <= n <= hi:
-        raise VrechoError(f"{where}: expected a whole number from {lo} to {hi}, got {n!r}")
-    return int(n)
 
 
 def doa(capture: Capture, n_sources: int, *, method: str = "NormMUSIC", n_grid: int = 6000,

@@ -30,12 +30,12 @@ import numpy as np
 import scipy.cluster.hierarchy as hc
 from scipy.signal import resample_poly
 
-from vrecho.errors import VrechoError
+from vrecho.errors import VrechoError, check_count
 from vrecho.signals import SPEED_OF_SOUND
 
 from . import masknet
 from .capture import MAX_COORD_M, Capture
-from .locate import MAX_SOURCES, check_count
+from .locate import MAX_SOURCES
 
 BLIND_FRAME_S = 0.016
 """STFT frame of blind separation: 16 ms (256 points at 16 kHz). A capture of 1.5 s then gives

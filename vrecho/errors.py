@@ -132,6 +132,33 @@ def check_number(x, where: str, *, lo: float | None = None, hi: float | None = N
     return v
 
 
+def check_count(n, where: str, hi: int, lo: int = 1) -> int:
+    """``n`` as an int if it is a whole number from ``lo`` to ``hi`` (not a bool): a count, a seed,
+    an argument of a public call.
+
+    Parameters
+    ----------
+    n : object
+        The value given.
+    where : str
+        The argument's name, which errors name.
+    hi, lo : int
+        The largest and the smallest allowed (``lo`` 1 by default).
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    VrechoError
+        Naming ``where`` and the allowed range, for anything else.
+    """
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not lo <= n <= hi:
+        raise VrechoError(f"{where}: expected a whole number from {lo} to {hi}, got {n!r}")
+    return int(n)
+
+
 def check_vector(x, where: str, n: int = 3, *, lo: float | None = None, hi: float | None = None) -> np.ndarray:
     """``x`` as a float vector of ``n`` finite numbers, each within ``lo`` to ``hi``.
 

@@ -11,7 +11,7 @@ import numpy as np
 import localization
 import usd_export
 
-from ..errors import VrechoError
+from ..errors import VrechoError, check_count
 from ..io import OutputFolder, atomic_write_text, write_mesh
 from ..reconstruct import LABELS, VARIANTS, Reconstruction
 from ..reconstruct import reconstruct as repair_scan
@@ -36,10 +36,8 @@ def _check(labels: str, variant: str, n_frames: int, seed: int) -> None:
         raise VrechoError(f"labels: expected one of {LABEL_CHOICES}, got {labels!r}")
     if variant not in VARIANTS:
         raise VrechoError(f"variant: expected one of {VARIANTS}, got {variant!r}")
-    if isinstance(n_frames, bool) or not isinstance(n_frames, (int, np.integer)) or not 2 <= n_frames <= 1000:
-        raise VrechoError(f"frames: expected a whole number from 2 to 1000, got {n_frames!r}")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
-        raise VrechoError(f"seed: expected a whole number from 0 to {2**32 - 1}, got {seed!r}")
+    check_count(n_frames, "frames", 1000, 2)
+    check_count(seed, "seed", 2**32 - 1, 0)
 
 
 def reconstruct(source: str | Path, out: str | Path, *, labels: str = "echocnn", variant: str = "simplified",
@@ -203,7 +201,8 @@ def export(source: str | Path, out: str | Path, *, labels: str = "echocnn", vari
     """
     out = usd_export.check_target(out)  # every check before the work, not after
     audio_dir = out.with_name(f"{out.stem}_audio")
-    theirs = [p for p in (out, audio_dir) if p.exists() and not usd_export.is_vrecho_stage(out)]
+    ours = usd_export.is_vrecho_stage(out)  # read once: a stage can be large
+    theirs = [p for p in (out, audio_dir) if p.exists() and not ours]
     if theirs and not force:
         raise VrechoError(f"out: {', '.join(map(str, theirs))} not written by vrecho export; choose another path, "
                           "or pass --force to replace it")

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ..errors import VrechoError, read_json
+from ..errors import VrechoError, check_count, read_json
 from ..features import logmel
 from ..io import atomic_write_text, ensure_writable_dir
 from ..scene import load_scene
@@ -223,8 +223,7 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise VrechoError(f"seed: expected a non-negative integer, got {seed!r}")
     workers = (os.cpu_count() or 1) if workers is None else workers
-    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or not 1 <= workers <= 256:
-        raise VrechoError(f"workers: expected a whole number from 1 to 256, got {workers!r}")
+    check_count(workers, "workers", 256)
     out = ensure_writable_dir(out)
     p = PRESETS[preset]
     manifest_path = out / "manifest.json"

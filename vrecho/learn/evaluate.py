@@ -27,7 +27,7 @@ import numpy as np
 import torch  # this module trains and judges models: torch is what it is for
 from scipy.signal import resample_poly
 
-from ..errors import VrechoError, read_json
+from ..errors import VrechoError, check_count, read_json
 from ..features import echo_features
 from ..io import OutputFolder, atomic_write_text, ensure_writable_dir
 from ..models import HEADS, EchoCNN, FeatureBaseline, build
@@ -305,9 +305,9 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
         For an unknown method, a seed, ``epochs`` or ``patience`` out of range, a missing or
         unfinished dataset, or an unwritable or foreign ``out``.
     """
-    for name, v, lo, hi in (("seed", seed, 0, 2**32 - 1), ("epochs", epochs, 1, 10000), ("patience", patience, 1, 10000)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
-            raise VrechoError(f"{name}: expected a whole number from {lo} to {hi}, got {v!r}")
+    check_count(seed, "seed", 2**32 - 1, 0)
+    check_count(epochs, "epochs", 10000)
+    check_count(patience, "patience", 10000)
     out = ensure_writable_dir(out)
     chosen = [method(m) for m in methods] if methods else list(METHODS)
     harness = Harness(data, seed=seed, progress=progress)
