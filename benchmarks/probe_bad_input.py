@@ -73,6 +73,13 @@ def no_sources(placed) -> str:
     return "flagged" if not placed else "confident"
 
 
+def unsure_sources(placed) -> str:
+    """No source, or none placed with confidence above 0.5."""
+    if any(not (_finite(p.position) and _finite(p.confidence)) for p in placed):
+        return "nan"
+    return "flagged" if all(p.confidence <= 0.5 for p in placed) else "confident"
+
+
 def finite_signal(y) -> str:
     return "flagged" if _finite(y) else "nan"
 
@@ -449,6 +456,10 @@ def audio_cases(base: Path, m: dict) -> list[Case]:
         cases.append(Case("recordings", f"predict with the probe: {k}",
                           lambda a=a: load_classifier().predict(a, fs, emitted=__import__("vrecho").signals.probe()),
                           unsure_prediction))
+    t = np.arange(fs) / fs
+    for name, fade in {"speech fading out": np.clip(1 - t, 0, 1), "speech dying away": np.exp(-4 * t)}.items():
+        talk = noise * env * np.cos(2 * np.pi * 3 * t) ** 2 * fade  # loud from the first sample
+        cases.append(Case("recordings", f"predict: {name}", predict(talk, fs), unsure_prediction))
     cases.append(Case("recordings", "predict_batch: mixed lengths", lambda: load_classifier().predict_batch(
         [one, one[:100]], fs), unsure_predictions))
     cases.append(Case("recordings", "predict: emitted NaN", predict(one, fs, emitted=np.full(100, np.nan))))
@@ -475,6 +486,12 @@ def audio_cases(base: Path, m: dict) -> list[Case]:
                                                                           str(out), "--quiet"],
                           judge=(lambda out=out, flag=flag: flagged_rows(out, flag)) if flag else None,
                           out=None if flag else out))
+    stereo = base / "wavs" / "stereo.wav"
+    sf.write(stereo, np.stack([0.3 * x, np.clip(x * 12, -1, 1)], 1), fs)
+    out = base / "outs" / "stereo"
+    cases.append(Case("recordings", "vrecho capture --audio: stereo, one channel clipped",
+                      ["capture", "--audio", str(stereo), "--out", str(out), "--quiet"],
+                      judge=lambda out=out: flagged_rows(out, "clipped")))
     for name, data in {"text as WAV": b"hello", "WAV header only": open(m["wav"], "rb").read()[:44],
                        "truncated WAV": open(m["wav"], "rb").read()[:5000],
                        "truncated video": (m["capture"] / "capture.mkv").read_bytes()[:20000],
@@ -546,6 +563,22 @@ def localization_cases() -> list[Case]:
                   [noise() for _ in range(3)], bounds=box), no_sources),
              Case("localization", "locate: independent noise", lambda: localization.locate([noise(), noise()], bounds=box),
                   lambda r: "flagged" if len(r.positions) == 0 else "confident")]
+    walk = [np.array([1.0 + 0.4 * k, 1.0 + 0.3 * k, 0.0]) + mics for k in range(4)]
+
+    def diffuse(m):  # 200 noise plane waves from random directions
+        f = np.fft.rfftfreq(16000, 1 / 16000)
+        spec = np.zeros((len(m), len(f)), complex)
+        for u in rng.standard_normal((200, 3)):
+            spec += np.fft.rfft(rng.standard_normal(16000))[None] * np.exp(
+                2j * np.pi * f[None] * (m @ (u / np.linalg.norm(u)))[:, None] / 343.0)
+        return 0.01 * np.fft.irfft(spec, 16000) / 20
+
+    common = 0.01 * rng.standard_normal(16000)
+    cases += [Case("localization", "place_sources: diffuse noise", lambda: localization.place_sources(
+                  [Capture(diffuse(m), 16000, m) for m in walk], bounds=box), unsure_sources),
+              Case("localization", "place_sources: crosstalk (one signal on every channel)", lambda: localization.place_sources(
+                  [Capture(common + 1e-4 * rng.standard_normal((4, 16000)), 16000, m) for m in walk], bounds=box),
+                  unsure_sources)]
     for n in (0, -1, 100, 2.5, "2", True, 10**9):
         cases.append(Case("localization", f"place_sources(n_sources={n!r})",
                           lambda n=n: localization.place_sources([coherent()], n, bounds=box)))
@@ -617,6 +650,9 @@ def command_cases(base: Path, m: dict) -> list[Case]:
                                                "--epochs", "-3"]),
         Case("commands", "train: no dataset", ["train", "--data", str(base / "none"), "--out", str(base / "run")]),
         Case("commands", "train: a dataset folder of junk", ["train", "--data", str(user), "--out", str(base / "run2")]),
+        Case("commands", "train: a dataset manifest without its counts", ["train", "--data", str(
+            _write(base / "bare" / "manifest.json", '{"format": "vrecho-dataset", "version": 1, "complete": true}').parent),
+            "--out", str(base / "run3")]),
         Case("commands", "evaluate: no run", ["evaluate", "--data", str(base / "none"), "--run", str(base / "none")]),
         Case("commands", "generate --workers 0", ["generate", "--out", str(base / "ds"), "--workers", "0"]),
         Case("commands", "generate into the user's folder", ["generate", "--out", str(user)], out=user),

@@ -295,3 +295,39 @@ def test_the_monitor_takes_any_block_or_refuses_it(blocks, seed):
             assert v is None or math.isfinite(v)
         if dtype != "uint8":
             assert np.all(np.abs(out.astype(np.float64)) <= max(np.iinfo(dtype).max if dtype.startswith("int") else 1, 1))
+
+
+def test_speech_that_goes_on_or_fades_is_not_a_pulse_and_the_rooms_decay_is(clf, recording):
+    """Without the emitted sound, a frame must be a sound of 100 ms and the room's decay: speech
+    fading over the frame (it goes on past 100 ms, or rises again after gaps) is flagged; the
+    built-in scene's frames are not (nor with the probe given)."""
+    from vrecho.capture import Recording, analyse
+
+    rng = np.random.default_rng(3)
+    t = np.arange(44100) / 44100
+    fading = [speech(1.4, rng)[:44100] * (np.exp(-t * rng.uniform(2, 8)) if i % 2 else np.clip(1 - t, 0, 1))
+              for i in range(8)]
+    preds = clf.predict_batch(np.stack(fading), 44100)  # 7 of 8 were answered at confidence 0.73 to 0.86
+    assert all(p.low_confidence for p in preds), preds
+    # one is a lone syllable of 140 ms, then silence: a sound and its (dry) decay, not confident
+    assert sum("no_pulse" in p.flags and p.confidence <= 0.5 for p in preds) >= 7
+    frames = analyse(Recording(recording, 44100), classifier=clf).frames
+    assert len(frames) >= 6
+    assert not any(p.flags for p in clf.predict_batch(frames, 44100))
+
+
+def test_one_clipped_channel_of_a_stereo_file_is_clipping(tmp_path):
+    import soundfile as sf
+
+    from vrecho.capture import read_audio
+    from vrecho.features import clipped
+
+    t = np.arange(44100) / 44100
+    quiet, loud = 0.1 * np.sin(2 * np.pi * 440 * t), np.clip(1.5 * np.sin(2 * np.pi * 440 * t), -1, 1)
+    assert not clipped(np.stack([quiet, loud], 1).mean(1))  # the plain mix hides it
+    sf.write(tmp_path / "stereo.wav", np.stack([quiet, loud], 1), 44100)
+    x, fs = read_audio(tmp_path / "stereo.wav")
+    assert fs == 44100 and x.shape == (44100,) and clipped(x)
+    sf.write(tmp_path / "fine.wav", np.stack([quiet, 0.5 * loud], 1), 44100)
+    x, _ = read_audio(tmp_path / "fine.wav")
+    assert not clipped(x) and np.allclose(x, (quiet + 0.5 * loud) / 2, atol=1e-4)

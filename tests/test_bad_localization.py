@@ -92,6 +92,43 @@ def test_a_real_source_is_still_found():
     assert np.degrees(np.arccos(one.directions[0, 0] @ u)) < 10
 
 
+def _diffuse(mics: np.ndarray, n: int, rng, n_waves: int = 300) -> np.ndarray:
+    """A diffuse field: ``n_waves`` independent white-noise plane waves from random directions
+    (exact fractional delays), ``n`` samples at each of ``mics``, RMS 0.01."""
+    f = np.fft.rfftfreq(n, 1 / FS)
+    spec = np.zeros((len(mics), len(f)), complex)
+    for _ in range(n_waves):
+        u = rng.standard_normal(3)
+        spec += np.fft.rfft(rng.standard_normal(n))[None] * np.exp(
+            2j * np.pi * f[None] * (mics @ (u / np.linalg.norm(u)))[:, None] / SPEED_OF_SOUND)
+    x = np.fft.irfft(spec, n)
+    return 0.01 * x / x.std()
+
+
+def test_what_the_array_hears_in_its_own_frame_gets_no_confidence():
+    """Diffuse noise (coherent across the array at low frequencies) and crosstalk (one signal on
+    every channel) were each placed as a source of confidence 1 (the independent-noise bound sat
+    at a tenth of their peak); they turn with the head, a source stays put: confidence 0. A
+    source 0 dB over the same diffuse field is found, with confidence."""
+    rng = np.random.default_rng(0)
+    n = int(1.0 * FS)
+    mics = [p.microphones(MIC_ARRAYS["headset4"]) for p in _poses(4)]
+    hiss = 1e-4 * rng.standard_normal((4, n))
+    diffuse = [Capture(_diffuse(m, n, rng) + hiss, FS, m) for m in mics]
+    common = rng.standard_normal(n) * 0.01
+    crosstalk = [Capture(common + hiss, FS, m) for m in mics]
+    for caps in (diffuse, crosstalk):
+        assert locate(caps, bounds=BOX).agreement <= 1.0
+        assert all(s.confidence == 0.0 for s in place_sources(caps, 1, bounds=BOX))
+    where = np.array([3.0, 3.2, 1.2])
+    played = [_play(m, where, n, FS, rng, 40) for m in mics]
+    heard = [Capture(0.01 * x / x.std() + c.audio, FS, c.mics) for x, c in zip(played, diffuse)]
+    found = locate(heard, bounds=BOX)
+    assert len(found.positions) >= 1 and np.linalg.norm(found.positions[0] - where) < 0.5
+    assert found.agreement > 1.2
+    assert place_sources(heard, 1, bounds=BOX)[0].confidence > 0.6
+
+
 def test_separation_position_on_a_microphone():
     """Issue 29: a source position on a microphone returned 47 360 NaN samples."""
     cap = _point_source(np.array([3.0, 3.2, 1.2]), 1, 0.25, 10.0)[0]

@@ -179,3 +179,37 @@ def test_commands_refuse_bad_input(tiny_dataset, tmp_path):
     assert r.returncode == 0, r.stderr
     r = run_cli("train", "--data", tiny_dataset, "--out", tmp_path / "run", "--method", "kNN", "--seed", "1", "--quiet")
     assert r.returncode == 2 and "another dataset or seed" in r.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("damage, message", [
+    (lambda d: _edit_manifest(d, lambda m: m.pop("n_frames")), "lacks its preset"),
+    (lambda d: _edit_manifest(d, lambda m: m.update(format="other")), "not a vrecho dataset's"),
+    (lambda d: __import__("shutil").rmtree(d / "frames.zarr" / "audio"), "frames.zarr is missing or damaged"),
+    (lambda d: (d / "labels.csv").write_text("frame,scene\n0,0\n"), "no column"),
+    (lambda d: (d / "labels.csv").write_text((d / "labels.csv").read_text().splitlines()[0] + "\n"), "labels.csv has 0 rows"),
+    (lambda d: (d / "labels.csv").unlink(), "not a readable labels table"),
+])
+def test_a_damaged_dataset_is_one_error(tiny_dataset, tmp_path, damage, message):
+    """A manifest that decodes but lacks what training reads, or arrays or labels gone: one line,
+    before any training (was a KeyError)."""
+    import shutil
+
+    from vrecho.learn.datasets import Dataset
+
+    copy = tmp_path / "ds"
+    shutil.copytree(tiny_dataset, copy)
+    damage(copy)
+    with pytest.raises(VrechoError, match=message):
+        Dataset(copy)
+    r = run_cli("train", "--data", copy, "--out", tmp_path / "run", "--method", "kNN", "--quiet")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and message.split()[0] in r.stderr, r.stderr
+    assert not (tmp_path / "run").exists() or not any((tmp_path / "run").iterdir())
+
+
+def _edit_manifest(folder, edit):
+    import json
+
+    m = json.loads((folder / "manifest.json").read_text())
+    edit(m)
+    (folder / "manifest.json").write_text(json.dumps(m))

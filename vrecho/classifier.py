@@ -44,9 +44,17 @@ SILENCE_RMS = 1e-6
 PULSE_LAG_S = 0.01
 """How late a frame's direct sound may begin, in seconds (the loudspeaker up to 3 m away)."""
 PULSE_ABOVE_TAIL_DB = 6.0
-"""With the emitted sound unknown, a frame's first 100 ms (the sound) must be this much louder
-than its second half (the room's decay and the noise; 20 dB and more in EchoCNN's training
-frames): steady noise, a tone or speech throughout is not a pulse."""
+"""A frame's sound (its first 100 ms, or the emitted sound's length) must be this much louder
+than the 20 ms that begin 40 ms after it ends (the room's decay by then: 9 dB and more in
+EchoCNN's training frames, 20 dB in the median): steady noise, a tone or speech that goes on
+is not a pulse."""
+TAIL_RISE_DB = 18.0
+"""After the sound and its first 40 ms of echoes, no 20 ms may rise this much above the
+quietest before it, counted from :data:`TAIL_FLOOR_DB` below the sound (15 dB at most in
+EchoCNN's training frames): a room's decay falls into its noise floor, and speech or music
+that goes on (syllables after gaps) rises again. Sounds fainter than the floor (a door or a
+voice far off) are not counted."""
+TAIL_FLOOR_DB = 35.0
 FLAGS = ("clipped", "low_rate", "no_pulse", "narrowband_emitted")
 """The flags an answer may carry (:class:`Prediction`)."""
 
@@ -171,8 +179,9 @@ class Classifier:
         below :data:`~vrecho.features.BAND_FS` (40 kHz); ``no_pulse``, a frame that does not
         begin with a pulse: with ``emitted``, no window within :data:`PULSE_LAG_S` of its start
         that the emitted sound explains by :data:`~vrecho.signals.MIN_COHERENCE` (its matched
-        filter), without it, a first 100 ms less than :data:`PULSE_ABOVE_TAIL_DB` above the
-        second half; ``narrowband_emitted``, an emitted sound that leaves part of 200 Hz to
+        filter), and, with it or without (a sound of 100 ms then), a frame whose sound does not
+        end (:data:`PULSE_ABOVE_TAIL_DB`) or whose tail rises again (:data:`TAIL_RISE_DB`):
+        not a pulse and the room's decay; ``narrowband_emitted``, an emitted sound that leaves part of 200 Hz to
         16 kHz more than 40 dB below its strongest octave.
 
         Parameters
@@ -223,12 +232,10 @@ class Classifier:
             f = echo_features(x, s, FS)
             batch["envelope"], batch["bands"] = torch.as_tensor(f.envelope), torch.as_tensor(f.bands)
             found["narrowband_emitted"] = np.broadcast_to(_narrowband(s), (len(x),))
-            found["no_pulse"] = ~_begins_with(x, s)
+            found["no_pulse"] = ~_begins_with(x, s) | ~_decays(x, s.shape[-1])
             key = "E"
         else:
-            head = np.sqrt(np.mean(x[:, :int(PULSE_S * FS)].astype(np.float64) ** 2, axis=1))
-            tail = np.sqrt(np.mean(x[:, FS // 2:].astype(np.float64) ** 2, axis=1))
-            found["no_pulse"] = head < tail * 10 ** (PULSE_ABOVE_TAIL_DB / 20)
+            found["no_pulse"] = ~_decays(x, int(PULSE_S * FS))
         if images is not None:
             batch["image"] = torch.as_tensor(_check_images(images, len(x)))
             key += "V"
@@ -284,6 +291,20 @@ def _begins_with(x: np.ndarray, s: np.ndarray) -> np.ndarray:
         env = analytic_envelope(frame, analytic_filter(sound, n), n)[:m - k + 1] / np.linalg.norm(sound)
         out[i] = coherence(frame, env, k).max() >= MIN_COHERENCE
     return out
+
+
+def _decays(x: np.ndarray, k: int) -> np.ndarray:
+    """Whether each frame (B, n) at 44.1 kHz is a sound of ``k`` samples and the room's decay:
+    :data:`PULSE_ABOVE_TAIL_DB` and :data:`TAIL_RISE_DB`."""
+    hop = int(0.02 * FS)
+    start = min(k + int(0.04 * FS), x.shape[1] - 2 * hop)
+    bins = (x.shape[1] - start) // hop
+    power = np.mean(x[:, start:start + bins * hop].astype(np.float64).reshape(len(x), bins, hop) ** 2, axis=2)
+    level = 10 * np.log10(power + 1e-30)
+    head = 10 * np.log10(np.mean(x[:, :k].astype(np.float64) ** 2, axis=1) + 1e-30)[:, None]
+    level = np.maximum(level, head - TAIL_FLOOR_DB)
+    rise = np.max(level[:, 1:] - np.minimum.accumulate(level, axis=1)[:, :-1], axis=1)
+    return (level[:, 0] <= head[:, 0] - PULSE_ABOVE_TAIL_DB) & (rise <= TAIL_RISE_DB)
 
 
 _NAMES = {"A": "EchoCNN-A", "AV": "EchoCNN-AV", "E": "EchoCNN-E", "EV": "EchoCNN-EV"}

@@ -4,6 +4,7 @@ repaired, and written as meshes and a report, or as an OpenUSD stage."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -211,7 +212,8 @@ def export(source: str | Path, out: str | Path, *, labels: str = "echocnn", vari
         if not Path(sources).is_file():
             raise VrechoError(f"sources: expected 'none', 'truth', 'heard' or a JSON file, got {sources!r}")
         from_file = usd_export.sources_from_json(sources)
-        usd_export.check_sources(from_file)  # their WAVs read now, not after minutes of work
+        # their WAVs read now, not after minutes of work, and once: the stage takes the samples
+        from_file = [replace(s, signal=x, fs=fs) for s, (x, fs) in zip(from_file, usd_export.check_sources(from_file))]
     _check(labels, variant, n_frames, seed)
     spec = resolve(source)
     if sources in ("truth", "heard") and isinstance(spec, Path):

@@ -13,6 +13,7 @@ import soundfile as sf
 from PIL import Image
 
 from ..errors import VrechoError
+from ..features import CLIP_LEVEL
 
 
 def read_video(path) -> tuple[np.ndarray, int, np.ndarray]:
@@ -223,7 +224,9 @@ def read_audio(path) -> tuple[np.ndarray, int]:
     Returns
     -------
     audio : numpy.ndarray [shape=(n,)], float32
-        The channels averaged.
+        The channels averaged; where any channel reaches full scale (clipped), the mix is at
+        full scale too, with that channel's sign, so that the clipping test
+        (:func:`~vrecho.features.clipped`) sees a clipped channel in the mix.
     fs : int
         Its sample rate in Hz.
 
@@ -239,7 +242,13 @@ def read_audio(path) -> tuple[np.ndarray, int]:
         raise VrechoError(f"{path}: cannot read it as sound ({e}); expected WAV or FLAC") from None
     if not x.size or not np.all(np.isfinite(x)):
         raise VrechoError(f"{path}: {'holds no samples' if not x.size else 'holds samples that are not finite numbers'}")
-    return x.mean(axis=1), int(fs)
+    mono = x.mean(axis=1)
+    if x.shape[1] > 1:
+        mag = np.abs(x)
+        rail = max(float(mag.max()), 1.0)
+        row, col = np.nonzero(mag >= CLIP_LEVEL * rail)
+        mono[row] = np.sign(x[row, col]) * rail
+    return mono, int(fs)
 
 
 def image_files(folder: Path, names: list[str] | None) -> list[Path]:

@@ -64,7 +64,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import VrechoError, check_number
+from ..errors import VrechoError, check_count, check_number
 from ..signals import SPEED_OF_SOUND
 from .echoes import EchoFinder, echo_path, mic_geometry
 from .ranging import GUARD, Envelope, ProbeSchedule, channel0, clipped, pcm_scale, probe_codes, zero_runs
@@ -182,7 +182,7 @@ class BoundaryMonitor:
         For another sample rate, a ``period_s`` out of range, thresholds out of order, a
         parameter that is not a finite number at least 0 (``threshold`` at least 1,
         ``max_range_m`` at least 0.05, above ``min_range_m``) or a ``seed`` that is not a
-        whole number at least 0.
+        whole number from 0 to 2**32 - 1.
 
     Examples
     --------
@@ -213,8 +213,8 @@ class BoundaryMonitor:
             check_number(v, name, lo=lo)
         if not min_range_m < max_range_m:
             raise VrechoError(f"min_range_m: must be below max_range_m ({max_range_m} m), got {min_range_m}")
-        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
-            raise VrechoError(f"seed: expected a whole number of at least 0, got {seed!r}")
+        if seed is not None:
+            check_count(seed, "seed", 2**32 - 1, 0)
         probes = probe_codes(fs)
         m = len(probes[0])
         least = 2 * max_range_m / SPEED_OF_SOUND + (m + 2 * GUARD) / fs + dither_s + 0.001

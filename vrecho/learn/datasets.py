@@ -212,7 +212,7 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
     Raises
     ------
     VrechoError
-        For an unknown preset, a negative or non-integer seed, fewer than 1 or more than 256
+        For an unknown preset, a seed not a whole number from 0 to 2**32 - 1, fewer than 1 or more than 256
         workers, an ``out`` that cannot be written, or one that holds another dataset or (without
         ``force``) other files.
     """
@@ -220,8 +220,7 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
 
     if preset not in PRESETS:
         raise VrechoError(f"preset: expected one of {tuple(PRESETS)}, got {preset!r}")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise VrechoError(f"seed: expected a non-negative integer, got {seed!r}")
+    seed = check_count(seed, "seed", 2**32 - 1, 0)
     workers = (os.cpu_count() or 1) if workers is None else workers
     check_count(workers, "workers", 256)
     out = ensure_writable_dir(out)
@@ -317,7 +316,9 @@ class Dataset:
     Raises
     ------
     VrechoError
-        When ``path`` holds no manifest, or an unfinished dataset.
+        When ``path`` holds no manifest, an unfinished dataset, a manifest of another format
+        or version or without its counts, or arrays or labels missing, damaged or of other
+        lengths than the manifest's.
     """
 
     def __init__(self, path: str | Path):
@@ -327,12 +328,35 @@ class Dataset:
         manifest_path = self.path / "manifest.json"
         if not manifest_path.exists():
             raise VrechoError(f"dataset {self.path}: no manifest.json; not a vrecho dataset")
-        self.manifest = read_json(manifest_path, "dataset manifest", expect=dict)
-        if not self.manifest.get("complete"):
+        m = self.manifest = read_json(manifest_path, "dataset manifest", expect=dict)
+        if m.get("format") != "vrecho-dataset" or m.get("version") != FORMAT_VERSION:
+            raise VrechoError(f"dataset {self.path}: manifest.json is not a vrecho dataset's of version "
+                              f"{FORMAT_VERSION} (format {m.get('format')!r}, version {m.get('version')!r})")
+        if not m.get("complete"):
             raise VrechoError(f"dataset {self.path}: unfinished; run `vrecho generate` again to complete it")
-        root = zarr.open_group(self.path / "frames.zarr", mode="r")
-        self.audio, self.logmel, self.image, self.ir = root["audio"], root["logmel"], root["image"], root["ir"]
+        counts = {k: m.get(k) for k in ("n_frames", "n_irs", "seed")}
+        settings = m.get("preset_settings")
+        if (any(isinstance(v, bool) or not isinstance(v, int) or v < 0 for v in counts.values())
+                or m.get("preset") not in PRESETS or not isinstance(settings, dict)
+                or not isinstance(settings.get("n_scenes"), int)):
+            raise VrechoError(f"dataset {self.path}: manifest.json lacks its preset, seed, preset_settings.n_scenes, "
+                              "n_frames or n_irs; regenerate it with `vrecho generate`")
+        try:
+            root = zarr.open_group(self.path / "frames.zarr", mode="r")
+            self.audio, self.logmel, self.image, self.ir = (root["audio"], root["logmel"], root["image"],
+                                                            root["ir"])
+        except (KeyError, FileNotFoundError, ValueError, TypeError, OSError) as e:
+            raise VrechoError(f"dataset {self.path}: frames.zarr is missing or damaged ({type(e).__name__}: {e}); "
+                              "regenerate it with `vrecho generate`") from None
+        for name, arr, rows in (("audio", self.audio, m["n_frames"]), ("logmel", self.logmel, m["n_frames"]),
+                                ("image", self.image, m["n_frames"]), ("ir", self.ir, m["n_irs"])):
+            if arr.shape[0] != rows:
+                raise VrechoError(f"dataset {self.path}: frames.zarr/{name} has {arr.shape[0]} rows where the "
+                                  f"manifest says {rows}; regenerate it with `vrecho generate`")
         self.labels = read_labels(self.path / "labels.csv")
+        if len(self.labels["frame"]) != m["n_frames"]:
+            raise VrechoError(f"dataset {self.path}: labels.csv has {len(self.labels['frame'])} rows where the "
+                              f"manifest says {m['n_frames']} frames; regenerate it with `vrecho generate`")
 
     def __len__(self) -> int:
         return len(self.labels["frame"])
@@ -493,18 +517,28 @@ def read_labels(path: str | Path) -> dict[str, np.ndarray]:
         One (N,) column per entry of :data:`LABEL_COLUMNS`: ``split``, ``kind``, ``sound`` and
         ``material`` str; ``frame``, ``scene``, ``pose``, ``ir``, ``heard``, ``sound_seed``,
         ``surface`` and ``is_open`` int64; the rest float64 (metres, degrees, seconds, dB).
+
+    Raises
+    ------
+    VrechoError
+        For a file that cannot be read, is not UTF-8 CSV, lacks a column or holds a value
+        that is not of its column's type.
     """
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    out = {}
-    for col in LABEL_COLUMNS:
-        vals = [r[col] for r in rows]
-        if col in ("split", "kind", "sound", "material"):
-            out[col] = np.array(vals, dtype=str)
-        elif col in ("frame", "scene", "pose", "ir", "heard", "sound_seed", "surface", "is_open"):
-            out[col] = np.array(vals, dtype=np.int64)
-        else:
-            out[col] = np.array(vals, dtype=np.float64)
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            rows = list(csv.DictReader(f))
+        out = {}
+        for col in LABEL_COLUMNS:
+            vals = [r[col] for r in rows]
+            if col in ("split", "kind", "sound", "material"):
+                out[col] = np.array(vals, dtype=str)
+            elif col in ("frame", "scene", "pose", "ir", "heard", "sound_seed", "surface", "is_open"):
+                out[col] = np.array(vals, dtype=np.int64)
+            else:
+                out[col] = np.array(vals, dtype=np.float64)
+    except (OSError, UnicodeDecodeError, csv.Error, KeyError, ValueError, TypeError) as e:
+        what = f"no column {e}" if isinstance(e, KeyError) else f"{type(e).__name__}: {e}"
+        raise VrechoError(f"{path}: not a readable labels table ({what}); regenerate the dataset") from None
     return out
 
 

@@ -117,7 +117,7 @@ def build_room(scene: Scene, fs: int = FS, *, sim: Simulation = DEFAULT_SIMULATI
     Raises
     ------
     VrechoError
-        If ``fs`` is not a whole number of hertz of at least 8000.
+        If ``fs`` is not a whole number of hertz from 8000 to 384 000.
     """
     import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
 
@@ -233,7 +233,7 @@ def impulse_responses(scene: Scene, source: np.ndarray, mics: np.ndarray, fs: in
     ------
     VrechoError
         If ``source`` or ``mics`` has the wrong shape, if the source or a microphone is outside
-        the room, or if ``fs`` is not a whole number of hertz of at least 8000.
+        the room, or if ``fs`` is not a whole number of hertz from 8000 to 384 000.
     """
     import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
 

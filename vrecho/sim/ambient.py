@@ -175,7 +175,7 @@ def simulate_walk_capture(room: Scene | Shoebox, sources: list[AmbientSource], p
     ------
     VrechoError
         If there is no source, a signal is not 1-D or too short, a source or a microphone is
-        outside the room, or ``fs`` is not a whole number of hertz of at least 8000.
+        outside the room, or ``fs`` is not a whole number of hertz from 8000 to 384 000.
     """
     fs = check_fs(fs)
     array = MIC_ARRAYS[array] if isinstance(array, str) else array

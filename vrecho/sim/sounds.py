@@ -55,7 +55,7 @@ def ambient_sound(kind: str, duration_s: float, fs: int, rng: np.random.Generato
     ------
     VrechoError
         If ``kind`` is unknown, ``duration_s`` is not a positive finite number, or ``fs`` is not
-        a whole number of hertz of at least 8000.
+        a whole number of hertz from 8000 to 384 000.
 
     Examples
     --------
