@@ -27,6 +27,7 @@ HEAVY = {
     "torch": 1.7, "open3d": 1.2, "pxr": 0.2, "av": 0.2,  # the issue's four
     "pyroomacoustics": 1.4, "sklearn": 1.7, "matplotlib": 0.8, "meshcat": 0.6, "zarr": 0.5,
     "sounddevice": 0.06,  # quick, but it loads PortAudio, a system library only `vrecho watch` needs
+    "ray": 1.0,  # an extra (pip install 'vrecho[ray]'): only with --ray
 }
 """Libraries that may be imported inside a function, with their import time in seconds (``python3
 -X importtime``, 2026-11-23, the 2-core machine; pxr and av are the issue's own choice; sounddevice

@@ -68,16 +68,21 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Simulate rooms, render every emitted sound and store frames, images, "
                                    "impulse responses and labels. Resumable: rerun to finish an interrupted run.")
     g.add_argument("--out", required=True, type=Path, help="dataset folder (created; must be empty or this dataset)")
-    g.add_argument("--preset", choices=("tiny", "default"), default="tiny", help="dataset size (default: tiny)")
+    g.add_argument("--preset", choices=("tiny", "small", "default"), default="tiny",
+                   help="dataset size: 384, 2 560 or 25 600 frames (default: tiny)")
     g.add_argument("--seed", type=SEED, default=0, help="random seed (default: 0)")
     g.add_argument("--workers", type=_whole(1, 256), default=None, help="processes (default: one per core)")
     g.add_argument("--cache", type=Path, default=None, help="impulse-response cache folder (default: ~/.cache/vrecho/ir)")
     g.add_argument("--force", action="store_true",
                    help="generate into a non-empty folder that holds no dataset, beside its files")
+    g.add_argument("--ray", nargs="?", const="auto", default=None, metavar="ADDRESS",
+                   help="rooms as Ray tasks: on a running cluster's ADDRESS (host:port; out and cache on a folder "
+                        "every node sees), or, with 'auto' or no ADDRESS, on a local cluster started here "
+                        "(needs: pip install 'vrecho[ray]')")
     g.add_argument("--quiet", action="store_true", help="no progress bar")
     g.set_defaults(resumable=True, func=lambda a: app.generate(a.out, preset=a.preset, seed=a.seed,
                                                                workers=a.workers, cache=a.cache, force=a.force,
-                                                               progress=not a.quiet))
+                                                               progress=not a.quiet, ray=a.ray))
 
     t = sub.add_parser("train", help="train EchoCNN and every baseline on a dataset",
                        description="Train every method of the benchmark (EchoCNN variants and baselines) on a dataset "
@@ -91,10 +96,17 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--patience", type=_whole(1, 10000), default=6, help="epochs without improvement before stopping (default: 6)")
     t.add_argument("--force", action="store_true",
                    help="train into a non-empty folder that holds no run, beside its files")
+    t.add_argument("--ray", nargs="?", const="auto", default=None, metavar="ADDRESS",
+                   help="train the CNNs with Ray Train (distributed data parallel) on a running cluster's ADDRESS "
+                        "(data and out on folders every node sees), or, with 'auto' or no ADDRESS, on a local "
+                        "cluster started here (needs: pip install 'vrecho[ray]')")
+    t.add_argument("--workers", type=_whole(1, 1024), default=1, help="Ray Train workers (with --ray; default: 1)")
+    t.add_argument("--gpus-per-worker", type=_finite, default=0.0, help="GPUs per Ray Train worker (with --ray; default: 0)")
     t.add_argument("--quiet", action="store_true", help="no progress bars")
     t.set_defaults(resumable=True, func=lambda a: app.train(a.data, a.out, methods=a.method, seed=a.seed,
                                                             epochs=a.epochs, patience=a.patience, force=a.force,
-                                                            progress=not a.quiet))
+                                                            progress=not a.quiet, ray=a.ray, workers=a.workers,
+                                                            gpus_per_worker=a.gpus_per_worker))
 
     e = sub.add_parser("evaluate", help="the paper's tables for every trained method",
                        description="Judge every method trained in RUN on the test rooms: the paper's two tables "

@@ -10,14 +10,14 @@ from ..learn.datasets import open_dataset
 
 
 def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: int | None = None, cache=None,
-             force: bool = False, progress: bool = True) -> Path:
+             force: bool = False, progress: bool = True, ray: str | None = None) -> Path:
     """``vrecho generate``: :func:`vrecho.learn.datasets.generate` (resumable), then what was made.
 
     Parameters
     ----------
     out : str or path
         Dataset folder; created if missing, and it must be empty or this dataset.
-    preset : {"tiny", "default"}
+    preset : {"tiny", "small", "default"}
         Dataset size (default ``tiny``).
     seed : int
         Everything follows from it (default 0).
@@ -29,6 +29,9 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
         Generate into a folder holding other files (not a dataset), beside them.
     progress : bool
         Show a progress bar.
+    ray : str, optional
+        Rooms as Ray tasks: ``"auto"`` (a local cluster) or a cluster's address
+        (:mod:`vrecho.learn.cluster`).
 
     Returns
     -------
@@ -41,7 +44,8 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
         For an unknown preset, a negative seed, fewer than 1 worker, or an ``out`` that cannot be
         written or holds something else.
     """
-    out = generate_dataset(out, preset=preset, seed=seed, workers=workers, cache=cache, progress=progress, force=force)
+    out = generate_dataset(out, preset=preset, seed=seed, workers=workers, cache=cache, progress=progress, force=force,
+                           ray=ray)
     ds = open_dataset(out)
     m = ds.manifest
     print(f"{out}: {len(ds)} frames ({int(ds.mask(kind='echo').sum())} echo, {int(ds.mask(kind='source').sum())} "
@@ -52,7 +56,8 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
 
 
 def train(data: str | Path, out: str | Path, *, methods=None, seed: int = 0, epochs: int = 40, patience: int = 6,
-          force: bool = False, progress: bool = True) -> dict[str, dict]:
+          force: bool = False, progress: bool = True, ray: str | None = None, workers: int = 1,
+          gpus_per_worker: float = 0.0) -> dict[str, dict]:
     """``vrecho train``: :func:`vrecho.learn.evaluate.train_methods` (resumable), then each
     method's record; ``out/classifier.pt`` once the shipped methods are trained.
 
@@ -74,6 +79,12 @@ def train(data: str | Path, out: str | Path, *, methods=None, seed: int = 0, epo
         Train into a folder holding other files (not a run), beside them.
     progress : bool
         Show progress bars.
+    ray : str, optional
+        Train the CNNs with Ray Train: ``"auto"`` (a local cluster) or a cluster's address.
+    workers : int
+        Ray Train workers (with ``ray``; default 1).
+    gpus_per_worker : float
+        GPUs per Ray Train worker (with ``ray``; default 0).
 
     Returns
     -------
@@ -88,7 +99,7 @@ def train(data: str | Path, out: str | Path, *, methods=None, seed: int = 0, epo
     from ..learn.evaluate import train_methods  # torch-bound (1.7 s): only when training
 
     records = train_methods(data, out, methods=methods, seed=seed, epochs=epochs, patience=patience, progress=progress,
-                            force=force)
+                            force=force, ray=ray, workers=workers, gpus_per_worker=gpus_per_worker)
     for name, r in records.items():
         extra = f", {r['epochs']} epochs (best {r['best_epoch'] + 1})" if "epochs" in r else ""
         print(f"{name:18s} {r['protocol']:7s} {r['n_train']:6d} train frames, {r['seconds']:7.1f} s{extra}")

@@ -5,6 +5,7 @@
 - train.py: targets, losses and the resumable training loop (:func:`~.train.fit`);
 - evaluate.py: the paper's methods and baselines trained and judged side by side (``vrecho train``,
   ``vrecho evaluate``), and the classifier's weights bundled; report.py: their tables and figures;
+- cluster.py: generation and training on a Ray cluster (``--ray``; Ray is an extra);
 - headset_view.py, masknet.py: the headset view's glass/mirror model and localization's mask
   network, each trained again by ``python3 -m vrecho.learn.<name>``.
 

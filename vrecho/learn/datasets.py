@@ -36,9 +36,11 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from ..errors import VrechoError, check_count, read_json
+from . import cluster
 from ..features import logmel
 from ..io import atomic_write_text, ensure_writable_dir
 from ..scene import load_scene
@@ -82,6 +84,7 @@ class Preset:
 
 PRESETS = {
     "tiny": Preset(n_scenes=6, n_poses=3, n_sources=1, split=(4 / 6, 1 / 6, 1 / 6)),
+    "small": Preset(n_scenes=16, n_poses=8, n_sources=2, split=(0.75, 0.125, 0.125)),
     "default": Preset(n_scenes=160, n_poses=8, n_sources=2, split=(0.7, 0.1, 0.2)),
 }
 
@@ -100,7 +103,14 @@ def _block(preset: Preset) -> int:
 
 
 def _scene_rows(out: Path, index: int, preset_name: str, seed: int, split: str, cache) -> list[dict]:
-    """Simulate one room, write its arrays and return its label rows."""
+    """Simulate one room, write its arrays and return its label rows; BLAS on one thread, so
+    that the arrays are the same bit for bit whatever runs it (a process of the pool, the
+    driver, a Ray task: the log-mel's matrix product rounds by the threads' split)."""
+    with threadpool_limits(1):
+        return _scene_rows_here(out, index, preset_name, seed, split, cache)
+
+
+def _scene_rows_here(out: Path, index: int, preset_name: str, seed: int, split: str, cache) -> list[dict]:
     import zarr  # heavy (0.5 s to import): only the dataset's arrays need it
 
     preset = PRESETS[preset_name]
@@ -180,7 +190,8 @@ def _worker_init() -> None:
 
 
 def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: int | None = None,
-             cache: str | Path | None = None, progress: bool = True, force: bool = False) -> Path:
+             cache: str | Path | None = None, progress: bool = True, force: bool = False,
+             ray: str | None = None) -> Path:
     """Generate (or finish) a dataset in ``out``.
 
     Resumable: a rerun does only the rooms not yet finished; a complete dataset is returned as
@@ -190,8 +201,9 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
     ----------
     out : path
         Dataset folder; created if missing. A folder holding another preset or seed is refused.
-    preset : {"tiny", "default"}
+    preset : {"tiny", "small", "default"}
         ``tiny``: 6 rooms, 4 poses or sources each, 16 sounds (384 frames), for tests.
+        ``small``: 16 rooms as ``default``'s (2 560 frames), for benchmarks and quick trials.
         ``default``: 160 rooms, 8 poses and 2 sources each (20 480 echo and 5 120 source frames).
     seed : int
         Everything (rooms, poses, sounds, noise, ray tracing) follows from it.
@@ -203,6 +215,10 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
         Show a progress bar.
     force : bool
         Generate into an ``out`` that holds other files (not another dataset) beside them.
+    ray : str, optional
+        Run the rooms as Ray tasks (:mod:`vrecho.learn.cluster`): ``"auto"`` on a local cluster
+        started here, or a running cluster's address; ``out`` and ``cache`` must be folders
+        every node sees. The same arrays as without, bit for bit; ``workers`` is then unused.
 
     Returns
     -------
@@ -214,7 +230,8 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
     VrechoError
         For an unknown preset, a seed not a whole number from 0 to 2**32 - 1, fewer than 1 or more than 256
         workers, an ``out`` that cannot be written, or one that holds another dataset or (without
-        ``force``) other files.
+        ``force``) other files; with ``ray``, where Ray is not installed, no cluster answers, or
+        rooms failed after Ray's retries (the others kept).
     """
     import zarr  # heavy (0.5 s to import): only the dataset's arrays need it
 
@@ -223,6 +240,8 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
     seed = check_count(seed, "seed", 2**32 - 1, 0)
     workers = (os.cpu_count() or 1) if workers is None else workers
     check_count(workers, "workers", 256)
+    if ray is not None:
+        cluster.connect(ray)  # before anything is written: Ray missing or no cluster there is one line
     out = ensure_writable_dir(out)
     p = PRESETS[preset]
     manifest_path = out / "manifest.json"
@@ -259,7 +278,10 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
     bar = tqdm(total=p.n_scenes, initial=p.n_scenes - len(todo), unit="room", desc=f"generate {preset}",
                disable=not progress)
     try:
-        if workers == 1 or len(todo) <= 1:
+        if ray is not None:
+            cluster.run_rooms(ray, _scene_rows, todo, lambda i: (out, i, preset, seed, splits[i], cache),
+                              lambda i: bar.update())
+        elif workers == 1 or len(todo) <= 1:
             for i in todo:
                 _scene_rows(out, i, preset, seed, splits[i], cache)
                 bar.update()

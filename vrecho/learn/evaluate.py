@@ -17,20 +17,23 @@ the bundle the classifier ships (``classifier.pt``, see :mod:`vrecho.classifier`
 
 from __future__ import annotations
 
+import copy
 import json
 import pickle
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 import torch  # this module trains and judges models: torch is what it is for
 from scipy.signal import resample_poly
 
-from ..errors import VrechoError, check_count, read_json
+from ..errors import VrechoError, check_count, check_number, read_json
 from ..features import echo_features
 from ..io import OutputFolder, atomic_write_text, ensure_writable_dir
 from ..models import HEADS, EchoCNN, FeatureBaseline, build
+from . import cluster
 from .datasets import open_dataset
 from .report import activation_maximisation, confusion_figures, write_tables
 from .train import fit, metrics, predict_batches, targets
@@ -172,6 +175,29 @@ class Frames:
     def __len__(self) -> int:
         return len(self.rows)
 
+    def shard(self, index: int, count: int) -> "Frames":
+        """Every ``count``-th frame from ``index``: one worker's share (:mod:`.cluster`), read
+        from the store alone (the product protocol's rendered frames are rendered whole, then
+        shared out).
+
+        Parameters
+        ----------
+        index, count : int
+            The worker's rank and the number of workers.
+
+        Returns
+        -------
+        Frames
+        """
+        part = copy.copy(self)
+        if self.protocol == "product":
+            self._audio()
+            part.audio, part.emitted = self.audio[index::count], self.emitted[index::count]
+        part.rows, part.group = self.rows[index::count], self.group[index::count]
+        part.y = {k: v[index::count] for k, v in self.y.items()}
+        part._x = {k: v[index::count] for k, v in self._x.items()}
+        return part
+
     def _audio(self) -> np.ndarray:
         if self.audio is None and self.protocol == "product":
             self.audio, self.emitted, _, _ = self.ds.probe_frames(self.split, self.probes, seed=self.seed, progress=self.progress)
@@ -272,7 +298,8 @@ class Harness:
 
 
 def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, patience: int = 6,
-                  progress: bool = True, force: bool = False) -> dict[str, dict]:
+                  progress: bool = True, force: bool = False, ray: str | None = None, workers: int = 1,
+                  gpus_per_worker: float = 0.0) -> dict[str, dict]:
     """Train every method (or those named) on a dataset, resumably, into the run folder ``out``.
 
     A method already trained is skipped. When the methods of :data:`SHIPPED` are all trained,
@@ -292,6 +319,15 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
     progress : bool
     force : bool
         Train into an ``out`` that holds files training did not write (not another run).
+    ray : str, optional
+        Train the CNNs with Ray Train on ``workers`` workers (:func:`.cluster.fit_on_ray`):
+        ``"auto"`` (a local cluster) or a cluster's address; ``data`` and ``out`` on folders
+        every node sees. The baselines train here, on one process. Ray Train's checkpoints go
+        to ``out/ray/``.
+    workers : int
+        Ray Train workers, 1 to 1024 (default 1; only with ``ray``).
+    gpus_per_worker : float
+        GPUs per Ray Train worker, 0 to 8 (default 0; only with ``ray``).
 
     Returns
     -------
@@ -308,6 +344,12 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
     check_count(seed, "seed", 2**32 - 1, 0)
     check_count(epochs, "epochs", 10000)
     check_count(patience, "patience", 10000)
+    check_count(workers, "workers", 1024)
+    gpus_per_worker = check_number(gpus_per_worker, "gpus-per-worker", lo=0, hi=8)
+    if ray is None and (workers != 1 or gpus_per_worker):
+        raise VrechoError("workers and gpus-per-worker go with --ray (one process trains without it)")
+    if ray is not None:
+        cluster.connect(ray)  # before anything is written
     out = ensure_writable_dir(out)
     chosen = [method(m) for m in methods] if methods else list(METHODS)
     harness = Harness(data, seed=seed, progress=progress)
@@ -332,7 +374,15 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
             continue
         tr, va = harness.frames(m.protocol, "train"), harness.frames(m.protocol, "val")
         start = time.time()
-        if m.kind == "cnn":
+        if m.kind == "cnn" and ray is not None:
+            model, h = cluster.fit_on_ray(ray, method=m, seed=seed, epochs=epochs, patience=patience,
+                                          harness=partial(Harness, Path(harness.ds.path).resolve(), seed=seed,
+                                                          progress=False),
+                                          workers=workers, gpus_per_worker=gpus_per_worker, storage_path=out / "ray")
+            torch.save({"config": model.config, "state": model.state_dict()}, path)
+            rec = {"epochs": h.epochs, "best_epoch": h.best_epoch, "val_loss": round(h.best_val_loss, 4),
+                   "seconds": round(h.seconds, 1), "ray_workers": workers}
+        elif m.kind == "cnn":
             torch.manual_seed(seed)
             model = m.model()
             h = fit(model, tr.inputs(m.inputs), tr.y, va.inputs(m.inputs), va.y,

@@ -134,8 +134,8 @@ class History:
     seconds: float
 
 
-def _subset(x: dict[str, torch.Tensor], idx) -> dict[str, torch.Tensor]:
-    return {k: v[idx] for k, v in x.items()}
+def _subset(x: dict[str, torch.Tensor], idx, device=None) -> dict[str, torch.Tensor]:
+    return {k: v[idx].to(device) if device is not None else v[idx] for k, v in x.items()}
 
 
 def predict_batches(model: EchoCNN, x: dict[str, torch.Tensor], *, batch_size: int = 256) -> dict[str, torch.Tensor]:
@@ -158,16 +158,18 @@ def predict_batches(model: EchoCNN, x: dict[str, torch.Tensor], *, batch_size: i
     """
     model.eval()
     n = len(next(iter(x.values())))
+    device = next(model.parameters()).device
     parts = []
     with torch.no_grad():
         for i in range(0, n, batch_size):
-            parts.append(model(_subset(x, slice(i, i + batch_size))))
+            parts.append({k: v.cpu() for k, v in model(_subset(x, slice(i, i + batch_size), device)).items()})
     return {k: parts[0][k] if k == "depth_at" else torch.cat([p[k] for p in parts]) for k in parts[0]}
 
 
 def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, *, epochs: int = 40,
         batch_size: int = 64, lr: float = 1e-3, patience: int = 6, seed: int = 0,
-        checkpoint: str | Path | None = None, progress: bool = True, desc: str = "train") -> History:
+        checkpoint: str | Path | None = None, progress: bool = True, desc: str = "train", net=None,
+        on_epoch=None) -> History:
     """Train with Adam, keep the weights of the best validation loss, stop after ``patience``
     epochs without improvement.
 
@@ -201,6 +203,13 @@ def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, 
         Show a progress bar.
     desc : str
         The progress bar's label.
+    net : torch.nn.Module, optional
+        What the training steps call instead of ``model``: ``model`` wrapped for distributed
+        data parallel (:mod:`.cluster`), whose backward pass averages the gradients of every
+        worker's share of the batch. Validation calls ``model`` itself.
+    on_epoch : callable, optional
+        Called with the epoch's record (``epoch``, counted from 1, ``val_loss``, ``stopped``)
+        after each epoch, once the checkpoint is written.
 
     Returns
     -------
@@ -225,6 +234,8 @@ def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, 
         model.load_state_dict(saved["state"])
         opt.load_state_dict(saved["opt"])
         state = {k: saved.get(k, v) for k, v in state.items()}
+    net = model if net is None else net
+    device = next(model.parameters()).device
     start = time.time() - state["seconds"]
     done = state["stopped"] or state["epoch"] >= epochs
     bar = tqdm(total=epochs, initial=state["epoch"], desc=desc, unit="epoch", disable=not progress or done)
@@ -237,7 +248,7 @@ def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, 
             b = order[i:i + batch_size]
             if len(b) < 2:
                 continue
-            loss = loss_fn(model(_subset(x_train, b)), _subset(y_train, b))
+            loss = loss_fn(net(_subset(x_train, b, device)), _subset(y_train, b, device))
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -257,6 +268,8 @@ def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, 
         if checkpoint is not None:
             _atomic_torch_save({**state, "config": model.config, "state": model.state_dict(),
                                 "opt": opt.state_dict()}, checkpoint)
+        if on_epoch is not None:
+            on_epoch({"epoch": state["epoch"], "val_loss": val, "stopped": state["stopped"]})
     bar.close()
     if state["best_state"] is not None:
         model.load_state_dict(state["best_state"])

@@ -1,0 +1,125 @@
+"""Issue 28: generation and training on Ray against the single-machine paths, in one run.
+
+Usage: ``python3 benchmarks/bench_cluster.py [--preset small] [--runs 1] [--epochs 20]`` prints
+three tables:
+
+1. generation: frames per second of a preset (``small``: 16 rooms as the default preset's, 2 560
+   frames a run; ``--runs`` runs of seeds 1000, 1001, ..., each into a fresh folder with a fresh
+   impulse-response cache, so every room is simulated; the command's own start-up counted, as a
+   user meets it), by the process pool (``generate(workers=N)``) and by Ray tasks on
+   a local cluster of N CPUs (``generate(ray="auto")``), N = 1 and up to the machine's cores;
+   the scaling efficiency (rate with N over N times the rate with 1) and Ray's overhead against
+   the pool at the same N;
+2. training: EchoCNN-A on the tiny preset (the paper protocol's 144 training frames), samples
+   per second over ``--epochs`` epochs (the training loop's own time; Ray Train's start-up, its
+   workers and their data, apart), in one process (``fit``) and with Ray Train on 1 and 2
+   workers, and the validation loss each ends with;
+3. a projection of 10 million frames on a 64-node cluster from the per-worker rate measured.
+
+Every Ray run here starts its own local cluster (``ray.init(num_cpus=N)``), shut down after.
+Absolute rates hold on the machine stated only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("RAY_AUTH_MODE", "disabled")  # local clusters only
+
+
+def gen_rate(preset: str, workers: int, use_ray: bool, runs: int, base: Path) -> float:
+    import ray
+
+    from vrecho.learn.datasets import generate
+
+    if use_ray:
+        ray.init(num_cpus=workers, object_store_memory=1 << 30, include_dashboard=False, log_to_driver=False,
+                 configure_logging=False)
+    try:
+        frames, seconds = 0, 0.0
+        for k in range(runs):
+            out, cache = base / f"ds{k}", base / f"cache{k}"
+            t = time.perf_counter()
+            generate(out, preset=preset, seed=1000 + k, workers=workers, cache=cache, progress=False,
+                     ray="auto" if use_ray else None)
+            seconds += time.perf_counter() - t
+            frames += json.loads((out / "manifest.json").read_text())["n_frames"]
+            shutil.rmtree(out)
+            shutil.rmtree(cache)
+    finally:
+        if use_ray:
+            ray.shutdown()
+    return frames / seconds
+
+
+def train_rate(data: Path, epochs: int, workers: int | None, base: Path) -> tuple[float, float, float]:
+    """Samples per second in the training loop, the seconds around it (start-up) and the final
+    validation loss: ``workers`` None is one process."""
+    import ray
+
+    from vrecho.learn.evaluate import train_methods
+
+    out = base / f"run{workers}"
+    if workers:
+        ray.init(num_cpus=workers, object_store_memory=1 << 30, include_dashboard=False, log_to_driver=False,
+                 configure_logging=False)
+    try:
+        t = time.perf_counter()
+        rec = train_methods(data, out, methods=["EchoCNN-A"], epochs=epochs, patience=epochs, progress=False,
+                            ray="auto" if workers else None, workers=workers or 1)["EchoCNN-A"]
+        seconds = time.perf_counter() - t
+    finally:
+        if workers:
+            ray.shutdown()
+    return rec["n_train"] * rec["epochs"] / rec["seconds"], seconds - rec["seconds"], rec["val_loss"]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--preset", default="small", choices=("tiny", "small", "default"))
+    ap.add_argument("--runs", type=int, default=1)
+    ap.add_argument("--epochs", type=int, default=20)
+    a = ap.parse_args()
+    cores = os.cpu_count() or 1
+    ns = sorted({1, 2, min(cores, 4), min(cores, 8), min(cores, 16)} & set(range(1, cores + 1)))
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(tmp)
+        print(f"generation: {a.preset} preset, {a.runs} run(s) per row, fresh caches; {cores} cores\n")
+        print("| workers | process pool: frames/s | Ray tasks: frames/s | pool efficiency | Ray efficiency | Ray overhead vs pool |")
+        print("|---|---|---|---|---|---|")
+        rates = {}
+        for n in ns:
+            rates[n] = (gen_rate(a.preset, n, False, a.runs, base), gen_rate(a.preset, n, True, a.runs, base))
+            pool, ray_ = rates[n]
+            print(f"| {n} | {pool:.1f} | {ray_:.1f} | {pool / (n * rates[1][0]):.0%} | {ray_ / (n * rates[1][1]):.0%} "
+                  f"| {pool / ray_ - 1:+.0%} |", flush=True)
+        from vrecho.learn.datasets import generate
+
+        data = generate(base / "train_ds", preset="tiny", seed=0, cache=base / "train_cache", progress=False)
+        print(f"\ntraining: EchoCNN-A, tiny preset (paper protocol), {a.epochs} epochs\n")
+        print("| path | samples/s in training | start-up and the rest (s) | validation loss |")
+        print("|---|---|---|---|")
+        for label, w in (("one process (fit)", None), ("Ray Train, 1 worker", 1), ("Ray Train, 2 workers (DDP)", 2)):
+            rate, rest, val = train_rate(data, a.epochs, w, base)
+            print(f"| {label} | {rate:.0f} | {rest:.1f} | {val:.3f} |", flush=True)
+        per_worker = rates[1][1]
+        eff = rates[max(ns)][1] / (max(ns) * per_worker)
+        nodes, cores_per_node, frames = 64, 16, 10_000_000
+        workers = nodes * cores_per_node
+        hours = frames / (per_worker * workers * eff) / 3600
+        bytes_per_frame = 44100 * 2 + 62 * 25 * 4 + 64 * 25  # audio float16, log-mel float32, image uint8
+        print(f"\nprojection: {frames:,} frames on {nodes} nodes x {cores_per_node} cores = {workers} Ray workers at "
+              f"{per_worker:.1f} frames/s each and the efficiency measured at {max(ns)} ({eff:.0%}): {hours:.1f} h; "
+              f"the store takes {frames * bytes_per_frame / 1e12:.2f} TB at "
+              f"{per_worker * workers * eff * bytes_per_frame / 1e6:.0f} MB/s; the driver sees "
+              f"{per_worker * workers * eff / 160:.1f} rooms/s (160 frames a room at the default preset)")
+
+
+if __name__ == "__main__":
+    main()

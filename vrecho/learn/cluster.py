@@ -1,0 +1,309 @@
+"""Ray: dataset generation and training on a cluster (``--ray``).
+
+Ray is an extra (``pip install 'vrecho[ray]'``, pinned); without it every command runs as
+before and ``--ray`` says in one line how to install it. vrecho never starts a cluster behind
+the user's back: ``--ray auto`` starts a local one on this machine (its CPUs, a 1 GiB object
+store, no dashboard, token authentication off: it listens on this machine only); ``--ray
+ADDRESS`` joins the user's running cluster (``ray start --head`` prints the address) as it is
+configured.
+
+Generation: each room is one Ray task (:func:`run_rooms`), run by whichever node is free, that
+writes the room's arrays and its resume marker to the dataset's folder itself (a folder every
+node sees: NFS or the like). Ray retries a task whose worker dies (:data:`RETRIES` times); a
+room that still fails is reported by number and left for a rerun, which does only what is
+missing, exactly as on one machine. A room's numbers follow from the seed and its index alone,
+so the arrays are the single-machine path's, bit for bit.
+
+Training: :func:`fit_on_ray` runs :func:`vrecho.learn.train.fit`'s loop as Ray Train's
+``TorchTrainer`` (distributed data parallel): each worker reads its own shard of every batch
+from the Zarr store, gradients are averaged, and each epoch's state is a Ray Train checkpoint
+in the run folder, from which an interrupted run resumes.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import tempfile
+import threading
+from pathlib import Path
+from typing import Callable
+
+from ..errors import VrechoError
+
+INSTALL = "pip install 'vrecho[ray]'"
+RETRIES = 3
+"""How many times Ray reruns a room whose task failed (a worker or node lost, an error)."""
+OBJECT_STORE_BYTES = 1 << 30
+"""A local cluster's object store (the rooms' arrays go to the folder, not through it)."""
+
+
+def connect(address: str):
+    """Ray, connected: to a local cluster started here (``"auto"``) or a running one's address.
+
+    Parameters
+    ----------
+    address : str
+        ``"auto"``: start (or reuse, in this process) a local cluster on this machine; else a
+        cluster's address (``host:port``, or ``ray://host:port`` for Ray Client).
+
+    Returns
+    -------
+    module
+        The ``ray`` module, initialised.
+
+    Raises
+    ------
+    VrechoError
+        Where Ray is not installed, ``address`` is not a string, or no cluster answers there.
+    """
+    try:
+        import ray  # an extra (pip install 'vrecho[ray]'), and heavy: only with --ray
+    except ImportError:
+        raise VrechoError(f"--ray needs Ray, an extra: {INSTALL}") from None
+    if not isinstance(address, str) or not address.strip():
+        raise VrechoError(f"ray: expected 'auto' or a cluster's address (host:port), got {address!r}")
+    if ray.is_initialized():
+        return ray
+    try:
+        if address == "auto":
+            os.environ.setdefault("RAY_AUTH_MODE", "disabled")  # a local cluster, this machine only
+            ray.init(address="local", object_store_memory=OBJECT_STORE_BYTES, include_dashboard=False,
+                     log_to_driver=False, configure_logging=False)
+        else:
+            _answers(address)  # Ray itself retries an address where nothing listens for minutes
+            ray.init(address=address, log_to_driver=False, configure_logging=False)
+    except (OSError, RuntimeError, ValueError) as e:  # ConnectionError, TimeoutError, socket.gaierror
+        raise VrechoError(f"ray: no Ray cluster answers at {address!r} ({str(e).splitlines()[0] if str(e) else type(e).__name__}); "
+                          "start one with `ray start --head`, or pass --ray auto for one on this machine") from None
+    return ray
+
+
+def _answers(address: str, timeout_s: float = 5.0) -> None:
+    """Raise ConnectionError unless something listens at ``address`` (``[ray://]host:port``)."""
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if not host or not port.isdigit():
+        raise ValueError("expected host:port")
+    with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s):
+        pass
+
+
+def run_rooms(address: str, work: Callable, rooms: list[int], args: Callable[[int], tuple], on_done: Callable[[int], None]) -> None:
+    """``work(*args(i))`` for every room ``i`` of ``rooms``, one Ray task each, ``on_done(i)``
+    on the driver as each finishes.
+
+    Parameters
+    ----------
+    address : str
+        As :func:`connect` takes it.
+    work : callable
+        A module-level function (Ray pickles it by reference) that writes its room's results.
+    rooms : list of int
+        The rooms to do.
+    args : callable
+        A room's arguments to ``work``.
+    on_done : callable
+        Called with each room's index on the driver when it is written.
+
+    Raises
+    ------
+    VrechoError
+        Naming the rooms that failed after :data:`RETRIES` retries (the others are kept), and
+        those of :func:`connect`.
+    """
+    ray = connect(address)
+    task = ray.remote(num_cpus=1, max_retries=RETRIES, retry_exceptions=True)(_room_task)
+    pending = {task.remote(work, *args(i)): i for i in rooms}
+    failed = {}
+    try:
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            for ref in done:
+                i = pending.pop(ref)
+                try:
+                    ray.get(ref)
+                except (ray.exceptions.RayError, OSError) as e:
+                    failed[i] = str(e).strip().splitlines()[-1][:200]
+                    continue
+                on_done(i)
+    except BaseException:
+        for ref in pending:  # rooms under way are lost (no marker): a rerun does them
+            ray.cancel(ref, force=True)
+        raise
+    if failed:
+        first = ", ".join(f"{i} ({why})" for i, why in list(failed.items())[:3])
+        raise VrechoError(f"ray: {len(failed)} of {len(rooms)} rooms failed after {RETRIES} retries: {first}; "
+                          "the rest are kept: rerun the same command to retry them")
+
+
+def _room_task(work: Callable, *args) -> None:
+    # One task per CPU: the libraries stay single-threaded, as in generate's process pool.
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+        os.environ[var] = "1"
+    import torch  # heavy (1.7 s): loaded by the room's work anyway
+
+    torch.set_num_threads(1)
+    work(*args)
+
+
+def fit_on_ray(address: str, *, method, harness: Callable, seed: int, epochs: int, patience: int, workers: int,
+               gpus_per_worker: float, storage_path: Path):
+    """Train one CNN method of :mod:`.evaluate` with Ray Train's ``TorchTrainer``.
+
+    Each of ``workers`` workers reads its share of the training frames from the dataset's store
+    (every ``workers``-th frame, :meth:`~.evaluate.Frames.shard`, cut to the same count on every
+    worker) and runs :func:`~.train.fit` with the model wrapped for distributed data parallel
+    (``ray.train.torch.prepare_model``), a batch of 64 shared out (64 / ``workers`` frames per
+    worker and step); every worker judges the whole validation split, so all stop together.
+    Each epoch's state is reported as a Ray Train checkpoint under ``storage_path`` (one run
+    per method, named by its slug); a rerun resumes from the last one.
+
+    Parameters
+    ----------
+    address : str
+        As :func:`connect` takes it.
+    method : vrecho.learn.evaluate.Method
+        A CNN method.
+    harness : callable
+        Makes the dataset's :class:`~.evaluate.Harness` on a worker (a picklable partial: the
+        dataset's folder must be one every node sees).
+    seed, epochs, patience : int
+        As :func:`~.evaluate.train_methods` takes them.
+    workers : int
+        Ray Train workers.
+    gpus_per_worker : float
+        GPUs per worker (0: CPU, gloo).
+    storage_path : pathlib.Path
+        Where Ray Train keeps the runs' checkpoints (every node must see it).
+
+    Returns
+    -------
+    model : EchoCNN
+        With the best validation loss's weights, on the CPU, in evaluation mode.
+    history : vrecho.learn.train.History
+
+    Raises
+    ------
+    VrechoError
+        Those of :func:`connect`, or where training failed after Ray's retries (a rerun goes on
+        from the last epoch).
+    """
+    import torch  # heavy (1.7 s): only when training
+
+    ray = connect(address)
+    from ray.train import CheckpointConfig, FailureConfig, RunConfig, ScalingConfig  # an extra: only with --ray
+    from ray.train.torch import TorchTrainer  # an extra: only with --ray
+
+    from .train import History  # torch-bound: only when training
+
+    m = method
+    name = m.slug
+    run_dir = Path(storage_path) / name
+    latest = _latest_checkpoint(run_dir)
+    finished = None
+    if latest is not None:  # a run that stopped, or ran its epochs, is read, not relaunched
+        saved = torch.load(latest / "state.pt", map_location="cpu", weights_only=False)
+        finished = saved if saved["stopped"] or saved["epoch"] >= min(epochs, m.max_epochs or epochs) else None
+    config = {"harness": harness, "method": m, "seed": seed, "epochs": min(epochs, m.max_epochs or epochs),
+              "patience": patience, "resume": str(latest) if latest is not None else None}
+    resources = {"CPU": 1, "GPU": gpus_per_worker} if gpus_per_worker else {"CPU": 1}
+    trainer = TorchTrainer(_train_loop, train_loop_config=config,
+                           scaling_config=ScalingConfig(num_workers=workers, use_gpu=gpus_per_worker > 0,
+                                                        resources_per_worker=resources),
+                           run_config=RunConfig(name=name, storage_path=str(Path(storage_path).resolve()),
+                                                checkpoint_config=CheckpointConfig(num_to_keep=2),
+                                                failure_config=FailureConfig(max_failures=RETRIES)))
+    saved = finished
+    if saved is None:
+        try:
+            result = _in_thread(trainer.fit)
+        except ray.exceptions.RayError as e:
+            raise VrechoError(f"ray: training {m.name} failed ({str(e).strip().splitlines()[-1][:200]}); "
+                              "rerun the same command to resume from its last epoch") from None
+        if result.checkpoint is None:
+            raise VrechoError(f"ray: training {m.name} reported no checkpoint")
+        with result.checkpoint.as_directory() as d:
+            saved = torch.load(Path(d) / "state.pt", map_location="cpu", weights_only=False)
+    torch.manual_seed(seed)
+    model = m.model()
+    model.load_state_dict(saved["best_state"] if saved["best_state"] is not None else saved["state"])
+    model.eval()
+    return model, History(saved["epoch"], saved["best_epoch"], saved["best"], saved["seconds"])
+
+
+def _in_thread(call: Callable):
+    """``call()`` in a thread of its own, the main thread waiting: Ray Train installs its own
+    Ctrl-C handler (for good, exiting with status 1 and no word) only when it runs in the main
+    thread; here Ctrl-C stays vrecho's (one line, status 130), and the workers end with this
+    driver (a local cluster with it, a remote one's job as it disconnects)."""
+    box = {}
+
+    def run():
+        try:
+            box["result"] = call()
+        except BaseException as e:  # handed to the main thread as it is
+            box["error"] = e
+
+    thread = threading.Thread(target=run, name="ray-train-driver", daemon=True)
+    thread.start()
+    while thread.is_alive():
+        thread.join(0.2)
+    if "error" in box:
+        raise box["error"]
+    return box["result"]
+
+
+def _latest_checkpoint(run_dir: Path) -> Path | None:
+    """The newest checkpoint folder of an earlier run of that name (Ray Train's layout:
+    ``checkpoint_<time>`` folders holding ``state.pt``), or None."""
+    found = sorted((p for p in run_dir.glob("checkpoint_*") if (p / "state.pt").is_file()),
+                   key=lambda p: p.stat().st_mtime) if run_dir.is_dir() else []
+    return found[-1] if found else None
+
+
+def _train_loop(config: dict) -> None:
+    """One Ray Train worker's part of :func:`fit_on_ray`."""
+    import ray.train  # an extra, and heavy: only where Ray runs
+    import torch  # heavy (1.7 s): only where a worker trains
+    from ray.train.torch import prepare_model  # an extra: only where Ray runs
+
+    from .train import fit  # torch-bound: only where a worker trains
+
+    ctx = ray.train.get_context()
+    rank, world = ctx.get_world_rank(), ctx.get_world_size()
+    torch.set_num_threads(1)
+    m = config["method"]
+    harness = config["harness"]()
+    train = harness.frames(m.protocol, "train")
+    n = len(train) // world  # every worker the same number of steps: the gradients are averaged at each
+    train = train.shard(rank, world)
+    x, y = train.inputs(m.inputs), train.y
+    x, y = {k: v[:n] for k, v in x.items()}, {k: v[:n] for k, v in y.items()}
+    val = harness.frames(m.protocol, "val")
+    torch.manual_seed(config["seed"])
+    model = m.model()
+    # on this worker's device; wrapped for DDP where there are several workers (a frame's kind leaves
+    # some heads out of the loss: their parameters get no gradient on some steps)
+    net = prepare_model(model, parallel_strategy_kwargs={"find_unused_parameters": True})
+    with tempfile.TemporaryDirectory() as work:
+        ckpt = Path(work) / "state.pt"
+        # a worker restarted within the run resumes from the run's checkpoint; a run started again
+        # after an interrupt, from the last one its folder holds
+        resume = ray.train.get_checkpoint()
+        if resume is not None:
+            with resume.as_directory() as d:
+                ckpt.write_bytes((Path(d) / "state.pt").read_bytes())
+        elif config["resume"] is not None:
+            ckpt.write_bytes((Path(config["resume"]) / "state.pt").read_bytes())
+
+        def report(record: dict) -> None:
+            if rank == 0:
+                with tempfile.TemporaryDirectory() as out:
+                    (Path(out) / "state.pt").write_bytes(ckpt.read_bytes())
+                    ray.train.report(record, checkpoint=ray.train.Checkpoint.from_directory(out))
+            else:
+                ray.train.report(record)
+
+        fit(model, x, y, val.inputs(m.inputs), val.y, epochs=config["epochs"], batch_size=max(2, 64 // world),
+            patience=config["patience"], seed=config["seed"], checkpoint=ckpt, progress=False, net=net,
+            on_epoch=report)
