@@ -96,3 +96,50 @@ def test_ray_training_on_two_workers_checkpoints_and_resumes(tiny_dataset, tmp_p
     assert r.returncode == 0, r.stderr
     a, b = torch.load(whole / "models" / "echocnn_a.pt"), torch.load(cut / "models" / "echocnn_a.pt")
     assert all(torch.equal(a["state"][k], b["state"][k]) for k in a["state"])
+
+
+@pytest.mark.slow
+def test_the_headset_views_training_on_two_ray_workers(tmp_path):
+    """The headset view's glass/mirror model the same way: its crops through Ray's object store,
+    two workers, a checkpoint per epoch; it learns a cue a crop carries as the one-process path
+    does."""
+    from vrecho.learn.headset_view import train
+
+    rng = np.random.default_rng(0)
+    n = 400
+    data = {"crops": rng.integers(0, 255, (n, 64, 25), dtype=np.uint8), "mirror": rng.integers(0, 2, n).astype(bool),
+            "room": np.repeat(np.arange(40), 10)}
+    data["crops"][data["mirror"], :, :12] = 250  # the mirrors' left half bright
+    code = ("import sys, pickle, pathlib; from vrecho.learn.headset_view import train; "
+            "data = pickle.load(open(sys.argv[1], 'rb')); "
+            "model, figures = train(data, epochs=3, progress=False, ray='auto', workers=2, "
+            "checkpoints=pathlib.Path(sys.argv[2])); print(figures['val_accuracy'], figures['epochs'])")
+    import pickle
+
+    (tmp_path / "data.pkl").write_bytes(pickle.dumps(data))
+    r = subprocess.run([sys.executable, "-c", code, str(tmp_path / "data.pkl"), str(tmp_path / "ck")], capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    accuracy, epochs = r.stdout.split()[-2:]
+    assert float(accuracy) >= 0.9 and int(epochs) == 3
+    assert list((tmp_path / "ck" / "headset_view").glob("checkpoint_*/state.pt"))
+    local, figures = train(data, epochs=3, progress=False)
+    assert figures["val_accuracy"] >= 0.9
+
+
+@pytest.mark.slow
+def test_the_mask_networks_walks_on_ray_are_the_processes_shards(tmp_path):
+    """The mask network's training walks as Ray tasks, one per share: the same shards as the
+    process pool's, bit for bit."""
+    code = ("import sys, pathlib; from vrecho.learn.masknet import make_examples\n"
+            "if __name__ == '__main__':\n"
+            "    make_examples(pathlib.Path(sys.argv[1]) / 'pool', rooms=2, jobs=2)\n"
+            "    make_examples(pathlib.Path(sys.argv[1]) / 'ray', rooms=2, jobs=2, ray='auto')\n")
+    (tmp_path / "make.py").write_text(code)
+    r = subprocess.run([sys.executable, str(tmp_path / "make.py"), str(tmp_path)], capture_output=True, text=True,
+                       timeout=600)
+    assert r.returncode == 0, r.stderr
+    for share in ("share0.npz", "share1.npz"):
+        a, b = np.load(tmp_path / "pool" / share), np.load(tmp_path / "ray" / share)
+        assert len(a["f"]) > 0
+        assert all(np.array_equal(a[k].view(np.uint8), b[k].view(np.uint8)) for k in "fmt")

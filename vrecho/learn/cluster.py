@@ -22,6 +22,7 @@ in the run folder, from which an interrupted run resumes.
 
 from __future__ import annotations
 
+import functools
 import os
 import socket
 import tempfile
@@ -88,7 +89,8 @@ def _answers(address: str, timeout_s: float = 5.0) -> None:
         pass
 
 
-def run_rooms(address: str, work: Callable, rooms: list[int], args: Callable[[int], tuple], on_done: Callable[[int], None]) -> None:
+def run_rooms(address: str, work: Callable, rooms: list[int], args: Callable[[int], tuple], on_done: Callable[[int], None],
+              *, what: str = "rooms") -> None:
     """``work(*args(i))`` for every room ``i`` of ``rooms``, one Ray task each, ``on_done(i)``
     on the driver as each finishes.
 
@@ -104,6 +106,8 @@ def run_rooms(address: str, work: Callable, rooms: list[int], args: Callable[[in
         A room's arguments to ``work``.
     on_done : callable
         Called with each room's index on the driver when it is written.
+    what : str
+        What the units are called in messages (default "rooms").
 
     Raises
     ------
@@ -132,7 +136,7 @@ def run_rooms(address: str, work: Callable, rooms: list[int], args: Callable[[in
         raise
     if failed:
         first = ", ".join(f"{i} ({why})" for i, why in list(failed.items())[:3])
-        raise VrechoError(f"ray: {len(failed)} of {len(rooms)} rooms failed after {RETRIES} retries: {first}; "
+        raise VrechoError(f"ray: {len(failed)} of {len(rooms)} {what} failed after {RETRIES} retries: {first}; "
                           "the rest are kept: rerun the same command to retry them")
 
 
@@ -146,29 +150,32 @@ def _room_task(work: Callable, *args) -> None:
     work(*args)
 
 
-def fit_on_ray(address: str, *, method, harness: Callable, seed: int, epochs: int, patience: int, workers: int,
-               gpus_per_worker: float, storage_path: Path):
-    """Train one CNN method of :mod:`.evaluate` with Ray Train's ``TorchTrainer``.
+def fit_on_ray(address: str, *, name: str, model: Callable, load: Callable, seed: int, epochs: int, patience: int,
+               workers: int, gpus_per_worker: float, storage_path: Path):
+    """:func:`~.train.fit` as Ray Train's ``TorchTrainer``: distributed data parallel.
 
-    Each of ``workers`` workers reads its share of the training frames from the dataset's store
-    (every ``workers``-th frame, :meth:`~.evaluate.Frames.shard`, cut to the same count on every
-    worker) and runs :func:`~.train.fit` with the model wrapped for distributed data parallel
+    Each of ``workers`` workers loads its own share of the training frames (``load``) and runs
+    :func:`~.train.fit` with the model wrapped for distributed data parallel
     (``ray.train.torch.prepare_model``), a batch of 64 shared out (64 / ``workers`` frames per
-    worker and step); every worker judges the whole validation split, so all stop together.
-    Each epoch's state is reported as a Ray Train checkpoint under ``storage_path`` (one run
-    per method, named by its slug); a rerun resumes from the last one.
+    worker and step: the gradients are averaged, the batch-norm statistics are each worker's);
+    every worker judges the whole validation set, so all stop together. Each epoch's state is
+    reported as a Ray Train checkpoint in ``storage_path / name``; a rerun resumes from the
+    last one.
 
     Parameters
     ----------
     address : str
         As :func:`connect` takes it.
-    method : vrecho.learn.evaluate.Method
-        A CNN method.
-    harness : callable
-        Makes the dataset's :class:`~.evaluate.Harness` on a worker (a picklable partial: the
-        dataset's folder must be one every node sees).
+    name : str
+        The run's name (a file name: the model's).
+    model : callable
+        Makes the untrained model (called after ``torch.manual_seed(seed)``, on every worker).
+    load : callable
+        ``load(rank, workers)`` gives a worker ``(x, y, x_val, y_val)``: its share of the
+        training inputs and targets, the same count for every worker, and the whole validation
+        set (:func:`arrays`, or a reader of the dataset's store every node sees).
     seed, epochs, patience : int
-        As :func:`~.evaluate.train_methods` takes them.
+        As :func:`~.train.fit` takes them.
     workers : int
         Ray Train workers.
     gpus_per_worker : float
@@ -178,7 +185,7 @@ def fit_on_ray(address: str, *, method, harness: Callable, seed: int, epochs: in
 
     Returns
     -------
-    model : EchoCNN
+    model : torch.nn.Module
         With the best validation loss's weights, on the CPU, in evaluation mode.
     history : vrecho.learn.train.History
 
@@ -196,39 +203,62 @@ def fit_on_ray(address: str, *, method, harness: Callable, seed: int, epochs: in
 
     from .train import History  # torch-bound: only when training
 
-    m = method
-    name = m.slug
-    run_dir = Path(storage_path) / name
-    latest = _latest_checkpoint(run_dir)
-    finished = None
+    latest = _latest_checkpoint(Path(storage_path) / name)
+    saved = None
     if latest is not None:  # a run that stopped, or ran its epochs, is read, not relaunched
-        saved = torch.load(latest / "state.pt", map_location="cpu", weights_only=False)
-        finished = saved if saved["stopped"] or saved["epoch"] >= min(epochs, m.max_epochs or epochs) else None
-    config = {"harness": harness, "method": m, "seed": seed, "epochs": min(epochs, m.max_epochs or epochs),
-              "patience": patience, "resume": str(latest) if latest is not None else None}
-    resources = {"CPU": 1, "GPU": gpus_per_worker} if gpus_per_worker else {"CPU": 1}
-    trainer = TorchTrainer(_train_loop, train_loop_config=config,
-                           scaling_config=ScalingConfig(num_workers=workers, use_gpu=gpus_per_worker > 0,
-                                                        resources_per_worker=resources),
-                           run_config=RunConfig(name=name, storage_path=str(Path(storage_path).resolve()),
-                                                checkpoint_config=CheckpointConfig(num_to_keep=2),
-                                                failure_config=FailureConfig(max_failures=RETRIES)))
-    saved = finished
+        last = torch.load(latest / "state.pt", map_location="cpu", weights_only=False)
+        saved = last if last["stopped"] or last["epoch"] >= epochs else None
     if saved is None:
+        config = {"model": model, "load": load, "seed": seed, "epochs": epochs, "patience": patience,
+                  "resume": str(latest) if latest is not None else None}
+        resources = {"CPU": 1, "GPU": gpus_per_worker} if gpus_per_worker else {"CPU": 1}
+        trainer = TorchTrainer(_train_loop, train_loop_config=config,
+                               scaling_config=ScalingConfig(num_workers=workers, use_gpu=gpus_per_worker > 0,
+                                                            resources_per_worker=resources),
+                               run_config=RunConfig(name=name, storage_path=str(Path(storage_path).resolve()),
+                                                    checkpoint_config=CheckpointConfig(num_to_keep=2),
+                                                    failure_config=FailureConfig(max_failures=RETRIES)))
         try:
             result = _in_thread(trainer.fit)
         except ray.exceptions.RayError as e:
-            raise VrechoError(f"ray: training {m.name} failed ({str(e).strip().splitlines()[-1][:200]}); "
+            raise VrechoError(f"ray: training {name} failed ({str(e).strip().splitlines()[-1][:200]}); "
                               "rerun the same command to resume from its last epoch") from None
         if result.checkpoint is None:
-            raise VrechoError(f"ray: training {m.name} reported no checkpoint")
+            raise VrechoError(f"ray: training {name} reported no checkpoint")
         with result.checkpoint.as_directory() as d:
             saved = torch.load(Path(d) / "state.pt", map_location="cpu", weights_only=False)
     torch.manual_seed(seed)
-    model = m.model()
-    model.load_state_dict(saved["best_state"] if saved["best_state"] is not None else saved["state"])
-    model.eval()
-    return model, History(saved["epoch"], saved["best_epoch"], saved["best"], saved["seconds"])
+    net = model()
+    net.load_state_dict(saved["best_state"] if saved["best_state"] is not None else saved["state"])
+    net.eval()
+    return net, History(saved["epoch"], saved["best_epoch"], saved["best"], saved["seconds"])
+
+
+def arrays(x: dict, y: dict, x_val: dict, y_val: dict) -> Callable:
+    """A ``load`` for :func:`fit_on_ray` of tensors in memory: put once in Ray's object store,
+    every ``workers``-th frame from a worker's rank its share (cut to the same count).
+
+    Parameters
+    ----------
+    x, y, x_val, y_val : dict of str to torch.Tensor
+        The training and validation inputs and targets, frames on the first axis.
+
+    Returns
+    -------
+    callable
+    """
+    import ray  # an extra: only with --ray (connected by then)
+
+    return functools.partial(_array_share, ray.put((x, y, x_val, y_val)))
+
+
+def _array_share(ref, rank: int, workers: int):
+    import ray  # an extra: only where Ray runs
+
+    x, y, x_val, y_val = ray.get(ref)
+    n = len(next(iter(y.values()))) // workers
+    return ({k: v[rank::workers][:n] for k, v in x.items()}, {k: v[rank::workers][:n] for k, v in y.items()},
+            x_val, y_val)
 
 
 def _in_thread(call: Callable):
@@ -272,16 +302,9 @@ def _train_loop(config: dict) -> None:
     ctx = ray.train.get_context()
     rank, world = ctx.get_world_rank(), ctx.get_world_size()
     torch.set_num_threads(1)
-    m = config["method"]
-    harness = config["harness"]()
-    train = harness.frames(m.protocol, "train")
-    n = len(train) // world  # every worker the same number of steps: the gradients are averaged at each
-    train = train.shard(rank, world)
-    x, y = train.inputs(m.inputs), train.y
-    x, y = {k: v[:n] for k, v in x.items()}, {k: v[:n] for k, v in y.items()}
-    val = harness.frames(m.protocol, "val")
+    x, y, x_val, y_val = config["load"](rank, world)
     torch.manual_seed(config["seed"])
-    model = m.model()
+    model = config["model"]()
     # on this worker's device; wrapped for DDP where there are several workers (a frame's kind leaves
     # some heads out of the loss: their parameters get no gradient on some steps)
     net = prepare_model(model, parallel_strategy_kwargs={"find_unused_parameters": True})
@@ -304,6 +327,6 @@ def _train_loop(config: dict) -> None:
             else:
                 ray.train.report(record)
 
-        fit(model, x, y, val.inputs(m.inputs), val.y, epochs=config["epochs"], batch_size=max(2, 64 // world),
+        fit(model, x, y, x_val, y_val, epochs=config["epochs"], batch_size=max(2, 64 // world),
             patience=config["patience"], seed=config["seed"], checkpoint=ckpt, progress=False, net=net,
             on_epoch=report)

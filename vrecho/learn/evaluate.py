@@ -375,9 +375,9 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
         tr, va = harness.frames(m.protocol, "train"), harness.frames(m.protocol, "val")
         start = time.time()
         if m.kind == "cnn" and ray is not None:
-            model, h = cluster.fit_on_ray(ray, method=m, seed=seed, epochs=epochs, patience=patience,
-                                          harness=partial(Harness, Path(harness.ds.path).resolve(), seed=seed,
-                                                          progress=False),
+            load = partial(_share, partial(Harness, Path(harness.ds.path).resolve(), seed=seed, progress=False), m)
+            model, h = cluster.fit_on_ray(ray, name=m.slug, model=m.model, load=load, seed=seed,
+                                          epochs=min(epochs, m.max_epochs or epochs), patience=patience,
                                           workers=workers, gpus_per_worker=gpus_per_worker, storage_path=out / "ray")
             torch.save({"config": model.config, "state": model.state_dict()}, path)
             rec = {"epochs": h.epochs, "best_epoch": h.best_epoch, "val_loss": round(h.best_val_loss, 4),
@@ -401,6 +401,18 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
     if all(name in records for name in SHIPPED.values()):
         export_classifier(out, out / "classifier.pt")
     return records
+
+
+def _share(harness, m: Method, rank: int, workers: int):
+    """A Ray Train worker's share of a method's frames (:func:`.cluster.fit_on_ray`'s ``load``):
+    every ``workers``-th training frame from ``rank``, read from the dataset's store alone, the
+    same count on every worker; the whole validation split."""
+    h = harness()
+    train, val = h.frames(m.protocol, "train"), h.frames(m.protocol, "val")
+    n = len(train) // workers
+    train = train.shard(rank, workers)
+    x = {k: v[:n] for k, v in train.inputs(m.inputs).items()}
+    return x, {k: v[:n] for k, v in train.y.items()}, val.inputs(m.inputs), val.y
 
 
 def load_method(run, m: Method):

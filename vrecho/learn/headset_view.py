@@ -21,6 +21,7 @@ from ..headset.view import WEIGHTS, material_probability, pane_crop, save
 from ..models import IGNORE, EchoCNN
 from ..sim.render import World, render_view
 from ..sim.scenes import random_scene
+from . import cluster
 from .train import fit
 
 TRAIN_SEED = 31000
@@ -122,7 +123,8 @@ def make_dataset(n_rooms: int, *, seed: int = TRAIN_SEED, jobs: int = 1, progres
     return {k: np.asarray(v) for k, v in out.items()}
 
 
-def train(data: dict[str, np.ndarray], *, epochs: int = 60, seed: int = 0, progress: bool = True) -> tuple[EchoCNN, dict]:
+def train(data: dict[str, np.ndarray], *, epochs: int = 60, seed: int = 0, progress: bool = True, ray: str | None = None,
+          workers: int = 1, gpus_per_worker: float = 0.0, checkpoints: Path | None = None) -> tuple[EchoCNN, dict]:
     """EchoCNN's visual branch trained on :func:`make_dataset`'s crops.
 
     Trained with :func:`vrecho.learn.train.fit` (a tenth of the rooms held out for early
@@ -140,6 +142,16 @@ def train(data: dict[str, np.ndarray], *, epochs: int = 60, seed: int = 0, progr
         Seeds the held-out rooms, the weights and the training.
     progress : bool
         Show a progress bar.
+    ray : str, optional
+        Train with Ray Train on ``workers`` workers (:func:`.cluster.fit_on_ray`): ``"auto"``
+        (a local cluster) or a cluster's address; the crops go through Ray's object store.
+    workers : int
+        Ray Train workers (with ``ray``; default 1).
+    gpus_per_worker : float
+        GPUs per worker (with ``ray``; default 0).
+    checkpoints : path, optional
+        Where Ray Train keeps the epochs' checkpoints (with ``ray``; a folder every node sees),
+        and a rerun resumes from; default ``headset-view-ray`` in the working folder.
 
     Returns
     -------
@@ -164,17 +176,28 @@ def train(data: dict[str, np.ndarray], *, epochs: int = 60, seed: int = 0, progr
              "src_cell": torch.full((n, 3), IGNORE, dtype=torch.long), "src_m": torch.full((n, 3), float("nan"))}
         return {"image": torch.as_tensor(crops.astype(np.float32) / 255)}, y
 
-    torch.manual_seed(seed)
-    model = EchoCNN(inputs=("image",), hidden=64)
     x_tr, y_tr = split(np.flatnonzero(~is_val), True)
     x_va, y_va = split(np.flatnonzero(is_val), False)
-    history = fit(model, x_tr, y_tr, x_va, y_va, epochs=epochs, patience=8, seed=seed, progress=progress,
-                  desc="headset view")
+    if ray is not None:
+        cluster.connect(ray)
+        model, history = cluster.fit_on_ray(ray, name="headset_view", model=_model, load=cluster.arrays(x_tr, y_tr, x_va, y_va),
+                                            seed=seed, epochs=epochs, patience=8, workers=workers,
+                                            gpus_per_worker=gpus_per_worker,
+                                            storage_path=Path(checkpoints or "headset-view-ray"))
+    else:
+        torch.manual_seed(seed)
+        model = _model()
+        history = fit(model, x_tr, y_tr, x_va, y_va, epochs=epochs, patience=8, seed=seed, progress=progress,
+                      desc="headset view")
     p = material_probability(data["crops"][is_val], model=model)
     figures = {"train_crops": int((~is_val).sum()), "val_crops": int(is_val.sum()),
                "val_accuracy": float(np.mean((p > 0.5) == data["mirror"][is_val])), "epochs": history.epochs,
                "seconds": history.seconds}
     return model, figures
+
+
+def _model() -> EchoCNN:
+    return EchoCNN(inputs=("image",), hidden=64)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -194,6 +217,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--jobs", type=int, default=2, help="processes rendering the rooms")
     ap.add_argument("--data", help="an .npz of make_dataset's crops to train on (made, and kept there, if missing)")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent.parent / "assets" / WEIGHTS))
+    ap.add_argument("--ray", nargs="?", const="auto", default=None, metavar="ADDRESS",
+                    help="train with Ray Train on a cluster's ADDRESS, or on a local one ('auto' or no ADDRESS)")
+    ap.add_argument("--workers", type=int, default=1, help="Ray Train workers (with --ray)")
+    ap.add_argument("--gpus-per-worker", type=float, default=0.0, help="GPUs per Ray Train worker (with --ray)")
+    ap.add_argument("--checkpoints", type=Path, default=None,
+                    help="Ray Train's checkpoints, and a rerun's resume (default: ./headset-view-ray)")
     args = ap.parse_args(argv)
     if args.data and Path(args.data).is_file():
         data = dict(np.load(args.data))
@@ -201,7 +230,8 @@ def main(argv: list[str] | None = None) -> None:
         data = make_dataset(args.rooms, seed=args.seed, jobs=args.jobs)
         if args.data:
             np.savez_compressed(args.data, **data)
-    model, figures = train(data, epochs=args.epochs)
+    model, figures = train(data, epochs=args.epochs, ray=args.ray, workers=args.workers,
+                           gpus_per_worker=args.gpus_per_worker, checkpoints=args.checkpoints)
     save(model, args.out)
     print(f"{args.out}: {figures}")
 

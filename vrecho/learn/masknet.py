@@ -34,6 +34,7 @@ from localization.separate import analysis, steering
 from ..errors import VrechoError, read_json
 from ..io import ensure_writable_dir
 from ..sim.ambient import random_walk, simulate_walk_capture
+from . import cluster
 
 SEED = 20_000
 """Training rooms' first seed."""
@@ -75,7 +76,7 @@ def _examples(args):
     return path
 
 
-def make_examples(data_dir: Path, *, rooms: int = 1200, jobs: int = 2, seed: int = SEED) -> list[Path]:
+def make_examples(data_dir: Path, *, rooms: int = 1200, jobs: int = 2, seed: int = SEED, ray: str | None = None) -> list[Path]:
     """Simulate ``rooms`` training walks on ``jobs`` processes into ``data_dir`` (reused when
     its shards were made for the same rooms, processes, seed and FFT size).
 
@@ -89,6 +90,10 @@ def make_examples(data_dir: Path, *, rooms: int = 1200, jobs: int = 2, seed: int
         Processes, one shard each (default 2).
     seed : int
         The first room's seed (default :data:`SEED`).
+    ray : str, optional
+        Make the shards as Ray tasks, one each (:func:`.cluster.run_rooms`): ``"auto"`` (a
+        local cluster) or a cluster's address, ``data_dir`` a folder every node sees; the same
+        shards as the processes' for the same ``jobs``.
 
     Returns
     -------
@@ -107,8 +112,13 @@ def make_examples(data_dir: Path, *, rooms: int = 1200, jobs: int = 2, seed: int
     want = {"rooms": rooms, "jobs": jobs, "seed": seed, "nfft": NFFT}
     if stamp.exists() and _stamp(stamp) == want:
         return [data_dir / f"share{s}.npz" for s in range(jobs)]
-    with get_context("spawn").Pool(jobs) as pool:
-        paths = pool.map(_examples, [(s, jobs, rooms, seed, data_dir) for s in range(jobs)])
+    if ray is not None:
+        cluster.run_rooms(ray, _examples, list(range(jobs)), lambda s: ((s, jobs, rooms, seed, data_dir),),
+                          lambda s: None, what="shares of the rooms")
+        paths = [data_dir / f"share{s}.npz" for s in range(jobs)]
+    else:
+        with get_context("spawn").Pool(jobs) as pool:
+            paths = pool.map(_examples, [(s, jobs, rooms, seed, data_dir) for s in range(jobs)])
     stamp.write_text(json.dumps(want))
     return paths
 
@@ -143,7 +153,7 @@ def _load_examples(paths: list[Path], dev: str):
 
 def train(out: Path, *, rooms: int = 1200, epochs: int = 16, lr: float = 2e-3, init: Path | None = None,
           jobs: int = 2, seed: int = SEED, width: int = 32, data_dir: Path | None = None,
-          progress: bool = True) -> list[float]:
+          progress: bool = True, ray: str | None = None) -> list[float]:
     """Train the mask network on simulated walks and save its weights.
 
     Simulate ``rooms`` training walks (into ``data_dir``, a temporary folder if None), train a
@@ -173,6 +183,8 @@ def train(out: Path, *, rooms: int = 1200, epochs: int = 16, lr: float = 2e-3, i
         Where the simulated examples are kept and reused (:func:`make_examples`).
     progress : bool
         Show a progress bar per epoch.
+    ray : str, optional
+        Simulate the walks as Ray tasks (:func:`make_examples`); the training itself runs here.
 
     Returns
     -------
@@ -188,7 +200,7 @@ def train(out: Path, *, rooms: int = 1200, epochs: int = 16, lr: float = 2e-3, i
     ensure_writable_dir(Path(out).parent)
     dev = "cuda" if torch.cuda.is_available() else "cpu"
     with tempfile.TemporaryDirectory() as tmp:
-        f, m, t = _load_examples(make_examples(Path(data_dir or tmp), rooms=rooms, jobs=jobs, seed=seed), dev)
+        f, m, t = _load_examples(make_examples(Path(data_dir or tmp), rooms=rooms, jobs=jobs, seed=seed, ray=ray), dev)
     torch.manual_seed(0)
     model = masknet_class()(width).to(dev)
     if init is not None:
@@ -240,9 +252,12 @@ def main():
     ap.add_argument("--width", type=int, default=32, help="the network's channels")
     ap.add_argument("--data", type=Path, default=None, help="keep the simulated examples here (and reuse them)")
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--ray", nargs="?", const="auto", default=None, metavar="ADDRESS",
+                    help="simulate the walks as Ray tasks (--jobs shares) on a cluster's ADDRESS, or on a local one")
     a = ap.parse_args()
     t0 = time.time()
-    train(a.out, rooms=a.rooms, epochs=a.epochs, lr=a.lr, init=a.init, jobs=a.jobs, seed=a.seed, width=a.width, data_dir=a.data)
+    train(a.out, rooms=a.rooms, epochs=a.epochs, lr=a.lr, init=a.init, jobs=a.jobs, seed=a.seed, width=a.width, data_dir=a.data,
+          ray=a.ray)
     print(f"{a.out} written in {time.time() - t0:.0f} s")
 
 
