@@ -17,6 +17,7 @@ from pathlib import Path
 from . import app
 from .app.scans import LABEL_CHOICES
 from .errors import VrechoError
+from .learn import cluster
 from .reconstruct import LABELS, VARIANTS
 
 
@@ -75,10 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--cache", type=Path, default=None, help="impulse-response cache folder (default: ~/.cache/vrecho/ir)")
     g.add_argument("--force", action="store_true",
                    help="generate into a non-empty folder that holds no dataset, beside its files")
-    g.add_argument("--ray", nargs="?", const="auto", default=None, metavar="ADDRESS",
-                   help="rooms as Ray tasks: on a running cluster's ADDRESS (host:port; out and cache on a folder "
-                        "every node sees), or, with 'auto' or no ADDRESS, on a local cluster started here "
-                        "(needs: pip install 'vrecho[ray]')")
+    cluster.add_argument(g, "rooms as Ray tasks")
     g.add_argument("--quiet", action="store_true", help="no progress bar")
     g.set_defaults(resumable=True, func=lambda a: app.generate(a.out, preset=a.preset, seed=a.seed,
                                                                workers=a.workers, cache=a.cache, force=a.force,
@@ -96,10 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--patience", type=_whole(1, 10000), default=6, help="epochs without improvement before stopping (default: 6)")
     t.add_argument("--force", action="store_true",
                    help="train into a non-empty folder that holds no run, beside its files")
-    t.add_argument("--ray", nargs="?", const="auto", default=None, metavar="ADDRESS",
-                   help="train the CNNs with Ray Train (distributed data parallel) on a running cluster's ADDRESS "
-                        "(data and out on folders every node sees), or, with 'auto' or no ADDRESS, on a local "
-                        "cluster started here (needs: pip install 'vrecho[ray]')")
+    cluster.add_argument(t, "train the CNNs with Ray Train (distributed data parallel)")
     t.add_argument("--workers", type=_whole(1, 1024), default=1, help="Ray Train workers (with --ray; default: 1)")
     t.add_argument("--gpus-per-worker", type=_finite, default=0.0, help="GPUs per Ray Train worker (with --ray; default: 0)")
     t.add_argument("--quiet", action="store_true", help="no progress bars")

@@ -30,7 +30,7 @@ import threading
 from pathlib import Path
 from typing import Callable
 
-from ..errors import VrechoError
+from ..errors import VrechoError, check_count, check_number
 
 INSTALL = "pip install 'vrecho[ray]'"
 RETRIES = 3
@@ -78,6 +78,54 @@ def connect(address: str):
         raise VrechoError(f"ray: no Ray cluster answers at {address!r} ({str(e).splitlines()[0] if str(e) else type(e).__name__}); "
                           "start one with `ray start --head`, or pass --ray auto for one on this machine") from None
     return ray
+
+
+def add_argument(parser, does: str) -> None:
+    """``--ray [ADDRESS]`` on a command line (argparse), its value for :func:`connect`.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The command's parser.
+    does : str
+        What runs on the cluster, for the help (e.g. ``"rooms as Ray tasks"``).
+    """
+    parser.add_argument("--ray", nargs="?", const="auto", default=None, metavar="ADDRESS",
+                        help=f"{does}: on a running Ray cluster's ADDRESS (host:port; the command's folders on one "
+                             f"every node sees), or, with 'auto' or no ADDRESS, on a local cluster started here "
+                             f"(needs: {INSTALL})")
+
+
+def scaling(ray: str | None, workers, gpus_per_worker) -> tuple[int, float]:
+    """Ray Train's workers and GPUs per worker checked, and the cluster connected, before any
+    work (:func:`fit_on_ray`).
+
+    Parameters
+    ----------
+    ray : str or None
+        As :func:`connect` takes it; None: one process trains, without Ray.
+    workers : int
+        Ray Train workers, 1 to 1024 (1 without ``ray``).
+    gpus_per_worker : float
+        GPUs per worker, 0 to 8 (0 without ``ray``).
+
+    Returns
+    -------
+    workers : int
+    gpus_per_worker : float
+
+    Raises
+    ------
+    VrechoError
+        For either out of its range or given without ``ray``, and those of :func:`connect`.
+    """
+    workers = check_count(workers, "workers", 1024)
+    gpus_per_worker = check_number(gpus_per_worker, "gpus-per-worker", lo=0, hi=8)
+    if ray is None and (workers != 1 or gpus_per_worker):
+        raise VrechoError("workers and gpus-per-worker go with --ray (one process trains without it)")
+    if ray is not None:
+        connect(ray)  # before anything is written
+    return workers, gpus_per_worker
 
 
 def _answers(address: str, timeout_s: float = 5.0) -> None:

@@ -29,7 +29,7 @@ import numpy as np
 import torch  # this module trains and judges models: torch is what it is for
 from scipy.signal import resample_poly
 
-from ..errors import VrechoError, check_count, check_number, read_json
+from ..errors import VrechoError, check_count, read_json
 from ..features import echo_features
 from ..io import OutputFolder, atomic_write_text, ensure_writable_dir
 from ..models import HEADS, EchoCNN, FeatureBaseline, build
@@ -344,12 +344,7 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
     check_count(seed, "seed", 2**32 - 1, 0)
     check_count(epochs, "epochs", 10000)
     check_count(patience, "patience", 10000)
-    check_count(workers, "workers", 1024)
-    gpus_per_worker = check_number(gpus_per_worker, "gpus-per-worker", lo=0, hi=8)
-    if ray is None and (workers != 1 or gpus_per_worker):
-        raise VrechoError("workers and gpus-per-worker go with --ray (one process trains without it)")
-    if ray is not None:
-        cluster.connect(ray)  # before anything is written
+    workers, gpus_per_worker = cluster.scaling(ray, workers, gpus_per_worker)
     out = ensure_writable_dir(out)
     chosen = [method(m) for m in methods] if methods else list(METHODS)
     harness = Harness(data, seed=seed, progress=progress)

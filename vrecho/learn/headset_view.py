@@ -146,9 +146,9 @@ def train(data: dict[str, np.ndarray], *, epochs: int = 60, seed: int = 0, progr
         Train with Ray Train on ``workers`` workers (:func:`.cluster.fit_on_ray`): ``"auto"``
         (a local cluster) or a cluster's address; the crops go through Ray's object store.
     workers : int
-        Ray Train workers (with ``ray``; default 1).
+        Ray Train workers, 1 to 1024 (with ``ray``; default 1).
     gpus_per_worker : float
-        GPUs per worker (with ``ray``; default 0).
+        GPUs per worker, 0 to 8 (with ``ray``; default 0).
     checkpoints : path, optional
         Where Ray Train keeps the epochs' checkpoints (with ``ray``; a folder every node sees),
         and a rerun resumes from; default ``headset-view-ray`` in the working folder.
@@ -176,10 +176,10 @@ def train(data: dict[str, np.ndarray], *, epochs: int = 60, seed: int = 0, progr
              "src_cell": torch.full((n, 3), IGNORE, dtype=torch.long), "src_m": torch.full((n, 3), float("nan"))}
         return {"image": torch.as_tensor(crops.astype(np.float32) / 255)}, y
 
+    workers, gpus_per_worker = cluster.scaling(ray, workers, gpus_per_worker)
     x_tr, y_tr = split(np.flatnonzero(~is_val), True)
     x_va, y_va = split(np.flatnonzero(is_val), False)
     if ray is not None:
-        cluster.connect(ray)
         model, history = cluster.fit_on_ray(ray, name="headset_view", model=_model, load=cluster.arrays(x_tr, y_tr, x_va, y_va),
                                             seed=seed, epochs=epochs, patience=8, workers=workers,
                                             gpus_per_worker=gpus_per_worker,
@@ -217,8 +217,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--jobs", type=int, default=2, help="processes rendering the rooms")
     ap.add_argument("--data", help="an .npz of make_dataset's crops to train on (made, and kept there, if missing)")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent.parent / "assets" / WEIGHTS))
-    ap.add_argument("--ray", nargs="?", const="auto", default=None, metavar="ADDRESS",
-                    help="train with Ray Train on a cluster's ADDRESS, or on a local one ('auto' or no ADDRESS)")
+    cluster.add_argument(ap, "train with Ray Train (distributed data parallel)")
     ap.add_argument("--workers", type=int, default=1, help="Ray Train workers (with --ray)")
     ap.add_argument("--gpus-per-worker", type=float, default=0.0, help="GPUs per Ray Train worker (with --ray)")
     ap.add_argument("--checkpoints", type=Path, default=None,

@@ -252,8 +252,7 @@ def main():
     ap.add_argument("--width", type=int, default=32, help="the network's channels")
     ap.add_argument("--data", type=Path, default=None, help="keep the simulated examples here (and reuse them)")
     ap.add_argument("--out", type=Path, required=True)
-    ap.add_argument("--ray", nargs="?", const="auto", default=None, metavar="ADDRESS",
-                    help="simulate the walks as Ray tasks (--jobs shares) on a cluster's ADDRESS, or on a local one")
+    cluster.add_argument(ap, "simulate the walks as Ray tasks (--jobs shares)")
     a = ap.parse_args()
     t0 = time.time()
     train(a.out, rooms=a.rooms, epochs=a.epochs, lr=a.lr, init=a.init, jobs=a.jobs, seed=a.seed, width=a.width, data_dir=a.data,
