@@ -167,21 +167,19 @@ def run_rooms(address: str, work: Callable, rooms: list[int], args: Callable[[in
     task = ray.remote(num_cpus=1, max_retries=RETRIES, retry_exceptions=True)(_room_task)
     pending = {task.remote(work, *args(i)): i for i in rooms}
     failed = {}
-    try:
-        while pending:
-            done, _ = ray.wait(list(pending), num_returns=1)
-            for ref in done:
-                i = pending.pop(ref)
-                try:
-                    ray.get(ref)
-                except (ray.exceptions.RayError, OSError) as e:
-                    failed[i] = str(e).strip().splitlines()[-1][:200]
-                    continue
-                on_done(i)
-    except BaseException:
-        for ref in pending:  # rooms under way are lost (no marker): a rerun does them
-            ray.cancel(ref, force=True)
-        raise
+    # An interrupt leaves the rooms under way to end with this driver (its tasks die with it; a room
+    # without its marker is done again by a rerun): force-cancelling them here raced their replies
+    # and aborted Ray's core worker after vrecho's line (a failed check in its task manager).
+    while pending:
+        done, _ = ray.wait(list(pending), num_returns=1)
+        for ref in done:
+            i = pending.pop(ref)
+            try:
+                ray.get(ref)
+            except (ray.exceptions.RayError, OSError) as e:
+                failed[i] = str(e).strip().splitlines()[-1][:200]
+                continue
+            on_done(i)
     if failed:
         first = ", ".join(f"{i} ({why})" for i, why in list(failed.items())[:3])
         raise VrechoError(f"ray: {len(failed)} of {len(rooms)} {what} failed after {RETRIES} retries: {first}; "
