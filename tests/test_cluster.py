@@ -128,13 +128,20 @@ def test_the_headset_views_training_on_two_ray_workers(tmp_path):
 
 
 @pytest.mark.slow
-def test_the_mask_networks_walks_on_ray_are_the_processes_shards(tmp_path):
+def test_the_mask_networks_walks_and_training_on_ray(tmp_path):
     """The mask network's training walks as Ray tasks, one per share: the same shards as the
-    process pool's, bit for bit."""
-    code = ("import sys, pathlib; from vrecho.learn.masknet import make_examples\n"
+    process pool's, bit for bit. Its training on two Ray Train workers, each reading its share
+    of the examples from the shards: it trains (finite validation losses, weights that load),
+    checkpoints each epoch, and a rerun reads the finished run instead of training again."""
+    code = ("import sys, pathlib; from vrecho.learn.masknet import make_examples, train\n"
             "if __name__ == '__main__':\n"
-            "    make_examples(pathlib.Path(sys.argv[1]) / 'pool', rooms=2, jobs=2)\n"
-            "    make_examples(pathlib.Path(sys.argv[1]) / 'ray', rooms=2, jobs=2, ray='auto')\n")
+            "    d = pathlib.Path(sys.argv[1])\n"
+            "    make_examples(d / 'pool', rooms=2, jobs=2)\n"
+            "    make_examples(d / 'ray', rooms=2, jobs=2, ray='auto')\n"
+            "    for k in range(2):\n"
+            "        h = train(d / f'mask{k}.pt', rooms=2, jobs=2, epochs=2, width=4, data_dir=d / 'ray', progress=False,\n"
+            "                  ray='auto', workers=2, checkpoints=d / 'ck')\n"
+            "        print('losses', *h)\n")
     (tmp_path / "make.py").write_text(code)
     r = subprocess.run([sys.executable, str(tmp_path / "make.py"), str(tmp_path)], capture_output=True, text=True,
                        timeout=600)
@@ -143,3 +150,12 @@ def test_the_mask_networks_walks_on_ray_are_the_processes_shards(tmp_path):
         a, b = np.load(tmp_path / "pool" / share), np.load(tmp_path / "ray" / share)
         assert len(a["f"]) > 0
         assert all(np.array_equal(a[k].view(np.uint8), b[k].view(np.uint8)) for k in "fmt")
+    first, again = (line.split()[1:] for line in r.stdout.splitlines() if line.startswith("losses"))
+    assert len(first) == 2 and all(np.isfinite(float(v)) for v in first) and again == first
+    checkpoints = list((tmp_path / "ck" / "masknet").glob("checkpoint_*/state.pt"))
+    assert checkpoints and max(torch.load(c, weights_only=False)["epoch"] for c in checkpoints) == 2
+    from localization.masknet import masknet_class
+
+    a, b = torch.load(tmp_path / "mask0.pt"), torch.load(tmp_path / "mask1.pt")
+    masknet_class()(4).load_state_dict({k: v.float() for k, v in a.items()})
+    assert all(torch.equal(a[k], b[k]) for k in a)

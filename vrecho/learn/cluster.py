@@ -197,16 +197,16 @@ def _room_task(work: Callable, *args) -> None:
 
 
 def fit_on_ray(address: str, *, name: str, model: Callable, load: Callable, seed: int, epochs: int, patience: int,
-               workers: int, gpus_per_worker: float, storage_path: Path):
-    """:func:`~.train.fit` as Ray Train's ``TorchTrainer``: distributed data parallel.
+               workers: int, gpus_per_worker: float, storage_path: Path, fit: Callable | None = None):
+    """A training loop as Ray Train's ``TorchTrainer``: distributed data parallel.
 
     Each of ``workers`` workers loads its own share of the training frames (``load``) and runs
-    :func:`~.train.fit` with the model wrapped for distributed data parallel
-    (``ray.train.torch.prepare_model``), a batch of 64 shared out (64 / ``workers`` frames per
-    worker and step: the gradients are averaged, the batch-norm statistics are each worker's);
-    every worker judges the whole validation set, so all stop together. Each epoch's state is
-    reported as a Ray Train checkpoint in ``storage_path / name``; a rerun resumes from the
-    last one.
+    the loop (``fit``; :func:`~.train.fit` by default) with the model wrapped for distributed
+    data parallel (``ray.train.torch.prepare_model``), a batch shared out (:func:`~.train.fit`'s
+    64 frames: 64 / ``workers`` per worker and step; the gradients are averaged, the batch-norm
+    statistics are each worker's); every worker judges the whole validation set, so all stop
+    together. Each epoch's state is reported as a Ray Train checkpoint in ``storage_path /
+    name``; a rerun resumes from the last one.
 
     Parameters
     ----------
@@ -217,9 +217,10 @@ def fit_on_ray(address: str, *, name: str, model: Callable, load: Callable, seed
     model : callable
         Makes the untrained model (called after ``torch.manual_seed(seed)``, on every worker).
     load : callable
-        ``load(rank, workers)`` gives a worker ``(x, y, x_val, y_val)``: its share of the
-        training inputs and targets, the same count for every worker, and the whole validation
-        set (:func:`arrays`, or a reader of the dataset's store every node sees).
+        ``load(rank, workers)`` gives a worker its data: for :func:`~.train.fit`, ``(x, y,
+        x_val, y_val)``, its share of the training inputs and targets (the same count for every
+        worker) and the whole validation set (:func:`arrays`, or a reader of the dataset's store
+        every node sees).
     seed, epochs, patience : int
         As :func:`~.train.fit` takes them.
     workers : int
@@ -228,6 +229,13 @@ def fit_on_ray(address: str, *, name: str, model: Callable, load: Callable, seed
         GPUs per worker (0: CPU, gloo).
     storage_path : pathlib.Path
         Where Ray Train keeps the runs' checkpoints (every node must see it).
+    fit : callable, optional
+        Another training loop, a module-level function (Ray pickles it by reference):
+        ``fit(model, net, data, *, world, seed, epochs, patience, checkpoint, on_epoch)``, where
+        ``data`` is ``load``'s, ``net`` the model wrapped for the workers, ``world`` their count;
+        it writes each epoch's state to ``checkpoint`` (resuming from it where it exists) as
+        :func:`~.train.fit` does (``epoch``, ``stopped``, ``state``, ``best_state``, ``best``,
+        ``best_epoch``, ``seconds``, ``losses``), then calls ``on_epoch(record)``.
 
     Returns
     -------
@@ -256,7 +264,7 @@ def fit_on_ray(address: str, *, name: str, model: Callable, load: Callable, seed
         saved = last if last["stopped"] or last["epoch"] >= epochs else None
     if saved is None:
         config = {"model": model, "load": load, "seed": seed, "epochs": epochs, "patience": patience,
-                  "resume": str(latest) if latest is not None else None}
+                  "fit": fit or _fit, "resume": str(latest) if latest is not None else None}
         resources = {"CPU": 1, "GPU": gpus_per_worker} if gpus_per_worker else {"CPU": 1}
         trainer = TorchTrainer(_train_loop, train_loop_config=config,
                                scaling_config=ScalingConfig(num_workers=workers, use_gpu=gpus_per_worker > 0,
@@ -277,7 +285,7 @@ def fit_on_ray(address: str, *, name: str, model: Callable, load: Callable, seed
     net = model()
     net.load_state_dict(saved["best_state"] if saved["best_state"] is not None else saved["state"])
     net.eval()
-    return net, History(saved["epoch"], saved["best_epoch"], saved["best"], saved["seconds"])
+    return net, History(saved["epoch"], saved["best_epoch"], saved["best"], saved["seconds"], tuple(saved.get("losses", ())))
 
 
 def arrays(x: dict, y: dict, x_val: dict, y_val: dict) -> Callable:
@@ -343,12 +351,10 @@ def _train_loop(config: dict) -> None:
     import torch  # heavy (1.7 s): only where a worker trains
     from ray.train.torch import prepare_model  # an extra: only where Ray runs
 
-    from .train import fit  # torch-bound: only where a worker trains
-
     ctx = ray.train.get_context()
     rank, world = ctx.get_world_rank(), ctx.get_world_size()
     torch.set_num_threads(1)
-    x, y, x_val, y_val = config["load"](rank, world)
+    data = config["load"](rank, world)
     torch.manual_seed(config["seed"])
     model = config["model"]()
     # on this worker's device; wrapped for DDP where there are several workers (a frame's kind leaves
@@ -373,6 +379,15 @@ def _train_loop(config: dict) -> None:
             else:
                 ray.train.report(record)
 
-        fit(model, x, y, x_val, y_val, epochs=config["epochs"], batch_size=max(2, 64 // world),
-            patience=config["patience"], seed=config["seed"], checkpoint=ckpt, progress=False, net=net,
-            on_epoch=report)
+        config["fit"](model, net, data, world=world, seed=config["seed"], epochs=config["epochs"],
+                      patience=config["patience"], checkpoint=ckpt, on_epoch=report)
+
+
+def _fit(model, net, data, *, world: int, seed: int, epochs: int, patience: int, checkpoint: Path, on_epoch: Callable) -> None:
+    """:func:`~.train.fit` on one worker, the batch of 64 shared out (``data``: its share of the
+    training inputs and targets, and the validation set)."""
+    from .train import fit  # torch-bound: only where a worker trains
+
+    x, y, x_val, y_val = data
+    fit(model, x, y, x_val, y_val, epochs=epochs, batch_size=max(2, 64 // world), patience=patience, seed=seed,
+        checkpoint=checkpoint, progress=False, net=net, on_epoch=on_epoch)

@@ -16,6 +16,7 @@ takes over an hour.)
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import tempfile
@@ -131,35 +132,123 @@ def _stamp(path: Path):
         return None
 
 
-def _load_examples(paths: list[Path], dev: str):
-    """The shards' features, magnitudes and targets, each one float16 tensor on ``dev`` (filled
-    shard by shard: no second copy of the whole set)."""
-    shapes = {}
+def _load_examples(paths: list[Path], dev: str = "cpu", rank: int = 0, world: int = 1):
+    """The shards' examples: a worker's share of the training rows and the validation rows.
+
+    The last 5 % of the examples (at least 8) are the validation set; of the others, worker
+    ``rank`` of ``world`` takes every ``world``-th from ``rank`` (cut to the same count for every
+    worker). Each array is one float16 tensor on ``dev``, filled shard by shard (no second copy
+    of the whole set).
+
+    Returns
+    -------
+    train, val : tuple of torch.Tensor
+        Features, microphone 0's magnitudes and targets, examples on the first axis.
+    """
+    shapes, counts = {}, []
     for p in paths:
         with np.load(p) as z:
             for k in "fmt":
                 n, *rest = z[k].shape
                 shapes[k] = (shapes.get(k, (0,))[0] + n, *rest)
-    out = {k: torch.empty(shape, dtype=torch.float16, device=dev) for k, shape in shapes.items()}
+            counts.append(len(z["f"]))
+    n = sum(counts)
+    nv = max(8, n // 20)
+    rows = {"train": np.arange(rank, n - nv, world)[:(n - nv) // world], "val": np.arange(n - nv, n)}
+    out = {(part, k): torch.empty((len(r), *shapes[k][1:]), dtype=torch.float16, device=dev)
+           for part, r in rows.items() for k in "fmt"}
     at = 0
-    for p in paths:
+    for p, count in zip(paths, counts):
         with np.load(p) as z:
             for k in "fmt":
                 a = z[k]
-                out[k][at:at + len(a)] = torch.as_tensor(a).to(dev)
-            at += len(a)
-    return out["f"], out["m"], out["t"]
+                for part, r in rows.items():
+                    here = r[(r >= at) & (r < at + count)]
+                    out[part, k][np.searchsorted(r, here)] = torch.as_tensor(a[here - at]).to(dev)
+        at += count
+    return tuple(out["train", k] for k in "fmt"), tuple(out["val", k] for k in "fmt")
+
+
+CROP = 126
+"""Frames of a training example's random crop."""
+
+
+def _fit(model, train_set, val_set, *, epochs: int, lr: float, batch: int, seed: int = 0, net=None,
+         checkpoint: Path | None = None, on_epoch=None, progress: bool = True) -> list[float]:
+    """The mask network's training: Adam on a one-cycle schedule peaking at ``lr``, ``batch``
+    examples a step (each epoch's order and crops seeded by ``(seed, epoch)``), the last epoch's
+    weights kept. With ``checkpoint``, each epoch's state is written there (as
+    :func:`vrecho.learn.train.fit` writes it, for :func:`.cluster.fit_on_ray`) and a run resumes
+    from it. ``net``: what the steps call (``model`` wrapped for distributed data parallel).
+    Returns each epoch's validation loss (dB)."""
+    from .train import atomic_torch_save  # the one atomic checkpoint writer
+
+    dev = next(model.parameters()).device
+    f, m, t = (a.to(dev) for a in train_set)
+    fv, mv, tv = (a.to(dev) for a in val_set)
+    net = model if net is None else net
+    n = len(f)
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    steps = max(1, epochs * (n // batch))
+    # a warm-up of 10 % of the steps; never of exactly one step, where OneCycleLR divides by zero
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, lr, total_steps=steps, pct_start=0.1 if steps != 10 else 0.2)
+    state = {"epoch": 0, "losses": [], "seconds": 0.0}
+    if checkpoint is not None and Path(checkpoint).exists():
+        saved = torch.load(checkpoint, map_location=dev, weights_only=False)
+        if saved.get("config") != {"epochs": epochs, "batch": batch, "examples": n, "lr": lr}:
+            raise VrechoError(f"checkpoint {checkpoint} is another run's ({saved.get('config')}); remove it or choose another folder")
+        model.load_state_dict(saved["state"])
+        opt.load_state_dict(saved["opt"])
+        sched.load_state_dict(saved["sched"])
+        state = {k: saved[k] for k in state}
+
+    def loss_of(call, F, M, T):
+        F, M, T = F.float(), M.float(), T.float()
+        floor = 1e-3 * (M ** 2).sum((1, 2))
+        return (10 * torch.log10((((call(F) * M - T) ** 2).sum((1, 2)) + floor) / ((T ** 2).sum((1, 2)) + floor))).mean()
+
+    start = time.time() - state["seconds"]
+    while state["epoch"] < epochs:
+        ep = state["epoch"]
+        rng = np.random.default_rng([seed, ep])
+        order = rng.permutation(n)
+        model.train()
+        bar = tqdm(range(n // batch), desc=f"epoch {ep + 1}/{epochs}", disable=not progress)
+        for b in bar:
+            idx = torch.as_tensor(np.sort(order[b * batch:(b + 1) * batch]), device=dev)
+            c0 = int(rng.integers(0, f.shape[-1] - CROP + 1))
+            loss = loss_of(net, *(a[idx][..., c0:c0 + CROP] for a in (f, m, t)))
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            bar.set_postfix(loss=f"{loss.item():.2f}")
+        model.eval()
+        with torch.no_grad():
+            val = float(np.mean([loss_of(model, *(a[i:i + 8][..., 31:31 + CROP] for a in (fv, mv, tv))).item()
+                                 for i in range(0, len(fv), 8)]))
+        state = {"epoch": ep + 1, "losses": [*state["losses"], val], "seconds": time.time() - start}
+        if checkpoint is not None:
+            best = int(np.argmin(state["losses"]))
+            atomic_torch_save({**state, "config": {"epochs": epochs, "batch": batch, "examples": n, "lr": lr},
+                                "state": model.state_dict(), "opt": opt.state_dict(), "sched": sched.state_dict(),
+                                "stopped": state["epoch"] >= epochs, "best_state": None, "best_epoch": best,
+                                "best": state["losses"][best]}, Path(checkpoint))
+        if on_epoch is not None:
+            on_epoch({"epoch": ep + 1, "val_loss": val, "stopped": ep + 1 >= epochs})
+    return state["losses"]
 
 
 def train(out: Path, *, rooms: int = 1200, epochs: int = 16, lr: float = 2e-3, init: Path | None = None,
           jobs: int = 2, seed: int = SEED, width: int = 32, data_dir: Path | None = None,
-          progress: bool = True, ray: str | None = None) -> list[float]:
+          progress: bool = True, ray: str | None = None, workers: int = 1, gpus_per_worker: float = 0.0,
+          checkpoints: Path | None = None) -> list[float]:
     """Train the mask network on simulated walks and save its weights.
 
     Simulate ``rooms`` training walks (into ``data_dir``, a temporary folder if None), train a
     network ``width`` channels wide (from ``init`` if given) for ``epochs`` with a one-cycle
-    schedule peaking at ``lr`` (on the GPU if there is one, in batches of 32; on the CPU in
-    batches of 8), and save the weights to ``out`` (float16, after every epoch).
+    schedule peaking at ``lr`` (on GPUs, in batches of 32; on CPUs, in batches of 8), and save
+    the weights to ``out`` (float16; after every epoch in one process, at the end on Ray).
 
     Parameters
     ----------
@@ -174,17 +263,26 @@ def train(out: Path, *, rooms: int = 1200, epochs: int = 16, lr: float = 2e-3, i
     init : path, optional
         Weights to start from.
     jobs : int
-        Processes simulating the walks (default 2).
+        Processes (or Ray tasks) simulating the walks, one shard each (default 2).
     seed : int
         The first room's seed (default :data:`SEED`).
     width : int
         The network's channels (default 32).
     data_dir : path, optional
-        Where the simulated examples are kept and reused (:func:`make_examples`).
+        Where the simulated examples are kept and reused (:func:`make_examples`); with ``ray``
+        at a cluster's address, a folder every node sees (required).
     progress : bool
         Show a progress bar per epoch.
     ray : str, optional
-        Simulate the walks as Ray tasks (:func:`make_examples`); the training itself runs here.
+        Simulate the walks as Ray tasks (:func:`make_examples`) and train with Ray Train on
+        ``workers`` workers (:func:`.cluster.fit_on_ray`; each reads its share of the examples
+        from ``data_dir``, the batch shared out among them): ``"auto"`` (a local cluster) or a
+        cluster's address.
+    workers, gpus_per_worker : int, float
+        Ray Train workers and GPUs per worker (:func:`.cluster.scaling`; with ``ray`` only).
+    checkpoints : path, optional
+        Ray Train's checkpoints, and a rerun's resume (with ``ray``; a folder every node sees);
+        default ``masknet-ray`` in the working folder.
 
     Returns
     -------
@@ -195,48 +293,57 @@ def train(out: Path, *, rooms: int = 1200, epochs: int = 16, lr: float = 2e-3, i
     Raises
     ------
     VrechoError
-        When the folder of ``out`` or ``data_dir`` cannot be written.
+        When the folder of ``out`` or ``data_dir`` cannot be written, ``workers`` or
+        ``gpus_per_worker`` is out of range or given without ``ray``, or ``ray`` names a
+        cluster's address without ``data_dir``.
     """
     ensure_writable_dir(Path(out).parent)
-    dev = "cuda" if torch.cuda.is_available() else "cpu"
+    workers, gpus_per_worker = cluster.scaling(ray, workers, gpus_per_worker)
+    if ray not in (None, "auto") and data_dir is None:
+        raise VrechoError("masknet: --ray at a cluster's address needs --data, a folder every node sees")
+    init_state = torch.load(init, map_location="cpu", weights_only=True) if init is not None else None
     with tempfile.TemporaryDirectory() as tmp:
-        f, m, t = _load_examples(make_examples(Path(data_dir or tmp), rooms=rooms, jobs=jobs, seed=seed, ray=ray), dev)
+        paths = make_examples(Path(data_dir or tmp), rooms=rooms, jobs=jobs, seed=seed, ray=ray)
+        if ray is not None:
+            batch = 32 if gpus_per_worker else 8
+            model, history = cluster.fit_on_ray(
+                ray, name="masknet", model=functools.partial(_model, width, init_state),
+                load=functools.partial(_load_examples, paths, "cpu"), seed=0, epochs=epochs, patience=epochs,
+                workers=workers, gpus_per_worker=gpus_per_worker, storage_path=Path(checkpoints or "masknet-ray"),
+                fit=functools.partial(_fit_on_worker, lr=lr, batch=batch))
+            _save(model, out)
+            return list(history.val_losses)
+        dev = "cuda" if torch.cuda.is_available() else "cpu"
+        train_set, val_set = _load_examples(paths, dev)
     torch.manual_seed(0)
-    model = masknet_class()(width).to(dev)
-    if init is not None:
-        model.load_state_dict(torch.load(init, map_location=dev, weights_only=True))
-    n, crop = len(f), 126
-    bs = 32 if dev == "cuda" else 8
-    nv = max(8, n // 20)
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, lr, total_steps=max(1, epochs * ((n - nv) // bs)), pct_start=0.1)
+    model = _model(width, init_state).to(dev)
 
-    def loss_of(idx, c0):
-        F, M, T = (a[idx][..., c0:c0 + crop].float() for a in (f, m, t))
-        floor = 1e-3 * (M ** 2).sum((1, 2))
-        return (10 * torch.log10((((model(F) * M - T) ** 2).sum((1, 2)) + floor) / ((T ** 2).sum((1, 2)) + floor))).mean()
+    def report(record):
+        print(f"epoch {record['epoch']}: validation loss {record['val_loss']:.2f} dB", flush=True)
+        _save(model, out)
 
-    rng = np.random.default_rng(0)
-    history = []
-    for ep in range(epochs):
-        model.train()
-        order = rng.permutation(n - nv)
-        bar = tqdm(range(len(order) // bs), desc=f"epoch {ep + 1}/{epochs}", disable=not progress)
-        for b in bar:
-            idx = torch.as_tensor(np.sort(order[b * bs:(b + 1) * bs]), device=dev)
-            loss = loss_of(idx, int(rng.integers(0, f.shape[-1] - crop + 1)))
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            sched.step()
-            bar.set_postfix(loss=f"{loss.item():.2f}")
-        model.eval()
-        with torch.no_grad():
-            history.append(float(np.mean([loss_of(torch.arange(i, min(n, i + 8), device=dev), 31).item()
-                                          for i in range(n - nv, n, 8)])))
-        print(f"epoch {ep + 1}: validation loss {history[-1]:.2f} dB", flush=True)
-        torch.save({k: v.half().cpu() for k, v in model.state_dict().items()}, out)  # as shipped
-    return history
+    return _fit(model, train_set, val_set, epochs=epochs, lr=lr, batch=32 if dev == "cuda" else 8, on_epoch=report,
+                progress=progress)
+
+
+def _model(width: int, init_state: dict | None = None):
+    """The untrained network (or ``init_state``'s weights), ``width`` channels wide."""
+    model = masknet_class()(width)
+    if init_state is not None:
+        model.load_state_dict(init_state)
+    return model
+
+
+def _save(model, out: Path) -> None:
+    torch.save({k: v.half().cpu() for k, v in model.state_dict().items()}, out)  # as shipped
+
+
+def _fit_on_worker(model, net, data, *, world: int, seed: int, epochs: int, patience: int, checkpoint: Path,
+                   on_epoch, lr: float, batch: int) -> None:
+    """:func:`_fit` as one of ``world`` Ray Train workers (:func:`.cluster.fit_on_ray`'s ``fit``):
+    ``batch`` examples a step shared out among them."""
+    _fit(model, *data, epochs=epochs, lr=lr, batch=max(1, batch // world), seed=seed, net=net, checkpoint=checkpoint,
+         on_epoch=on_epoch, progress=False)
 
 
 def main():
@@ -252,11 +359,15 @@ def main():
     ap.add_argument("--width", type=int, default=32, help="the network's channels")
     ap.add_argument("--data", type=Path, default=None, help="keep the simulated examples here (and reuse them)")
     ap.add_argument("--out", type=Path, required=True)
-    cluster.add_argument(ap, "simulate the walks as Ray tasks (--jobs shares)")
+    cluster.add_argument(ap, "simulate the walks as Ray tasks (--jobs shares) and train with Ray Train")
+    ap.add_argument("--workers", type=int, default=1, help="Ray Train workers (with --ray)")
+    ap.add_argument("--gpus-per-worker", type=float, default=0.0, help="GPUs per Ray Train worker (with --ray)")
+    ap.add_argument("--checkpoints", type=Path, default=None,
+                    help="Ray Train's checkpoints, and a rerun's resume (default: ./masknet-ray)")
     a = ap.parse_args()
     t0 = time.time()
     train(a.out, rooms=a.rooms, epochs=a.epochs, lr=a.lr, init=a.init, jobs=a.jobs, seed=a.seed, width=a.width, data_dir=a.data,
-          ray=a.ray)
+          ray=a.ray, workers=a.workers, gpus_per_worker=a.gpus_per_worker, checkpoints=a.checkpoints)
     print(f"{a.out} written in {time.time() - t0:.0f} s")
 
 

@@ -126,12 +126,15 @@ class History:
         That loss (inf if no epoch ran).
     seconds : float
         Training time in seconds, over every run of a resumed training.
+    val_losses : tuple of float
+        Each epoch's validation loss, from the first (a resumed run's included).
     """
 
     epochs: int
     best_epoch: int
     best_val_loss: float
     seconds: float
+    val_losses: tuple = ()
 
 
 def _subset(x: dict[str, torch.Tensor], idx, device=None) -> dict[str, torch.Tensor]:
@@ -224,7 +227,7 @@ def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, 
     n = len(next(iter(y_train.values())))
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     state = {"epoch": 0, "best": float("inf"), "best_epoch": -1, "since": 0, "seconds": 0.0, "stopped": False,
-             "best_state": None}
+             "best_state": None, "losses": []}
     checkpoint = Path(checkpoint) if checkpoint is not None else None
     if checkpoint is not None and checkpoint.exists():
         saved = torch.load(checkpoint, weights_only=False)
@@ -258,6 +261,7 @@ def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, 
         bar.set_postfix(val_loss=f"{val:.3f}")
         bar.update()
         state["epoch"] = epoch + 1
+        state["losses"] = [*state["losses"], val]
         if val < state["best"] - 1e-4:
             state.update(best=val, best_epoch=epoch, since=0,
                          best_state={k: v.detach().clone() for k, v in model.state_dict().items()})
@@ -266,7 +270,7 @@ def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, 
         state["stopped"] = state["since"] >= patience
         state["seconds"] = time.time() - start
         if checkpoint is not None:
-            _atomic_torch_save({**state, "config": model.config, "state": model.state_dict(),
+            atomic_torch_save({**state, "config": model.config, "state": model.state_dict(),
                                 "opt": opt.state_dict()}, checkpoint)
         if on_epoch is not None:
             on_epoch({"epoch": state["epoch"], "val_loss": val, "stopped": state["stopped"]})
@@ -274,10 +278,20 @@ def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, 
     if state["best_state"] is not None:
         model.load_state_dict(state["best_state"])
     model.eval()
-    return History(state["epoch"], state["best_epoch"], state["best"], state["seconds"])
+    return History(state["epoch"], state["best_epoch"], state["best"], state["seconds"], tuple(state["losses"]))
 
 
-def _atomic_torch_save(obj, path: Path) -> None:
+def atomic_torch_save(obj, path: Path) -> None:
+    """``torch.save(obj, path)`` by way of a temporary file beside it: an interrupt leaves the old
+    file or the new, never half of one.
+
+    Parameters
+    ----------
+    obj : object
+        What to save (a checkpoint's dict).
+    path : pathlib.Path
+        The file.
+    """
     tmp = path.with_name(path.name + ".tmp")
     torch.save(obj, tmp)
     tmp.replace(path)
