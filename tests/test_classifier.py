@@ -1,6 +1,8 @@
 """The shipped classifier, its input checks, training on the tiny preset, the harness commands."""
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -67,6 +69,44 @@ def test_other_sample_rates_are_resampled(clf, living_room_frames):
     x48 = librosa.resample(frames[0], orig_sr=44100, target_sr=48000)[:48000]
     a, b = clf.predict(frames[0], 44100), clf.predict(x48, 48000)
     assert abs(a.probabilities["open"] - b.probabilities["open"]) < 0.1
+
+
+def test_a_batch_is_its_frames_one_by_one_and_the_callers_threads_are_restored(clf, living_room_frames):
+    """predict_batch answers a batch in chunks on threads of its own, each library held to one
+    thread meanwhile: the answers are those of predict, frame by frame, and the caller's
+    settings (torch's threads, BLAS's) are as they were after, also after an error."""
+    from threadpoolctl import threadpool_info
+
+    from vrecho.signals import probe
+
+    frames, images, _ = living_room_frames
+    frames = np.concatenate([frames] * 3)  # more than one chunk
+    images = np.concatenate([images] * 3)
+
+    def pools():  # never torch.set_num_threads here: with 2 or more, torch 2.13's MKL solver fails later
+        return torch.get_num_threads(), sorted((i["user_api"], i["num_threads"]) for i in threadpool_info())
+
+    before = pools()
+    for kwargs, per_frame in (({"images": images}, lambda i: {"image": images[i]}),
+                              ({"emitted": probe()}, lambda i: {"emitted": probe()})):
+        batch = clf.predict_batch(frames, 44100, **kwargs)
+        for i in (0, len(frames) // 2, len(frames) - 1):
+            one = clf.predict(frames[i], 44100, **per_frame(i))
+            assert (one.is_open, one.material, one.flags) == (batch[i].is_open, batch[i].material, batch[i].flags)
+            assert abs(one.probabilities["open"] - batch[i].probabilities["open"]) < 1e-4
+            assert abs(one.depth_m - batch[i].depth_m) < 1e-4
+    with pytest.raises(VrechoError):
+        clf.predict_batch(frames, 44100, images=images[:2])
+    assert pools() == before
+    # and torch's own solver still works after, in a process of its own (torch.set_num_threads(2)
+    # alone leaves MKL's batched solver failing, DLASWP, and spinning for ever: vrecho never calls it)
+    code = ("import numpy as np, torch, vrecho; clf = vrecho.load_classifier(); "
+            "x = np.random.default_rng(0).standard_normal((20, 44100)).astype(np.float32) * 0.1; "
+            "clf.predict_batch(x, 44100); clf.predict(x[0], 44100); "
+            "a = 2 * torch.eye(512, dtype=torch.float64).repeat(2, 1, 1); "
+            "print(float(torch.linalg.solve(a, torch.ones(2, 512, 1, dtype=torch.float64)).mean()))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.split()[-1] == "0.5" and "MKL ERROR" not in r.stderr, r.stderr[-500:]
 
 
 @pytest.mark.parametrize("audio, fs, match", [

@@ -24,12 +24,18 @@ and ``narrowband_emitted``. ``vrecho capture`` flags its frames by the same rule
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 import torch
+from threadpoolctl import ThreadpoolController
 
 from .errors import VrechoError
 from .features import BAND_FS, check_emitted, check_frames, clipped, echo_features, logmel
@@ -184,6 +190,11 @@ class Classifier:
         not a pulse and the room's decay; ``narrowband_emitted``, an emitted sound that leaves part of 200 Hz to
         16 kHz more than 40 dB below its strongest octave.
 
+        While it runs, OpenMP (torch's operators) and BLAS are held to one thread each (a frame's arrays are
+        too small to share out; two threads per pool on two cores only wait for each other),
+        and the caller's settings are restored after; the frames are answered in chunks of
+        :data:`CHUNK` on a thread per CPU, at most 4.
+
         Parameters
         ----------
         audio : array_like, shape (B, n), float
@@ -225,43 +236,123 @@ class Classifier:
         if np.any(rms < SILENCE_RMS):
             raise VrechoError(f"audio: frame {int(np.argmax(rms < SILENCE_RMS))} is silent "
                               f"(RMS below {SILENCE_RMS:g}): is the microphone on?")
-        found = {"clipped": clipped(raw), "low_rate": np.full(len(x), fs < BAND_FS)}
-        batch, key = {}, "A"
+        key, s, narrow = "A", None, None
         if emitted is not None:
             s = check_emitted(emitted, fs, len(x))
-            f = echo_features(x, s, FS)
-            batch["envelope"], batch["bands"] = torch.as_tensor(f.envelope), torch.as_tensor(f.bands)
-            found["narrowband_emitted"] = np.broadcast_to(_narrowband(s), (len(x),))
-            found["no_pulse"] = ~_begins_with(x, s) | ~_decays(x, s.shape[-1])
+            narrow = np.broadcast_to(_narrowband(s), (len(x),))
             key = "E"
-        else:
-            found["no_pulse"] = ~_decays(x, int(PULSE_S * FS))
         if images is not None:
-            batch["image"] = torch.as_tensor(_check_images(images, len(x)))
+            images = _check_images(images, len(x))
             key += "V"
         model = self.models[key]
-        if "mel" in model.inputs:
-            batch["mel"] = torch.as_tensor(logmel(x, FS))
-        with torch.no_grad():
-            out = model(batch)
-        p_open = torch.softmax(out["open"], 1)[:, 1].numpy()
-        p_mirror = torch.softmax(out["material"], 1)[:, 1].numpy()
-        p_depth = torch.softmax(out["depth_bin"], 1).numpy()
+        chunks = [slice(i, i + CHUNK) for i in range(0, len(x), CHUNK)]
+
+        def answer(part: slice) -> dict[str, np.ndarray]:
+            return _answer(model, x[part], raw[part], None if s is None else s if s.ndim == 1 else s[part],
+                           None if images is None else images[part])
+
+        with _few_threads():
+            parts = list(_pool().map(answer, chunks)) if len(chunks) > 1 else [answer(chunks[0])]
+        out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+        found = {"clipped": out["clipped"], "low_rate": np.full(len(x), fs < BAND_FS), "no_pulse": out["no_pulse"]}
+        if narrow is not None:
+            found["narrowband_emitted"] = narrow
         preds = []
         for i in range(len(x)):
             flagged = tuple(name for name in FLAGS if name in given[i] or (name in found and found[name][i]))
-            conf = float(max(p_open[i], 1 - p_open[i]))
+            p_open, p_mirror = float(out["open"][i]), float(out["mirror"][i])
+            conf = max(p_open, 1 - p_open)
             if flagged:
                 conf = min(conf, FLAGGED_CONFIDENCE)
-            probs = {"open": float(p_open[i]), "closed": float(1 - p_open[i]), "glass": float(1 - p_mirror[i]),
-                     "mirror": float(p_mirror[i])}
-            probs.update({f"depth_{d:g}": float(p) for d, p in zip(DEPTH_BINS_M, p_depth[i])})
-            preds.append(Prediction(is_open=bool(p_open[i] > 0.5), material="mirror" if p_mirror[i] > 0.5 else "glass",
+            probs = {"open": p_open, "closed": 1 - p_open, "glass": 1 - p_mirror, "mirror": p_mirror}
+            probs.update({f"depth_{d:g}": float(p) for d, p in zip(DEPTH_BINS_M, out["depth_bin"][i])})
+            preds.append(Prediction(is_open=p_open > 0.5, material="mirror" if p_mirror > 0.5 else "glass",
                                     depth_m=float(out["depth_m"][i]), probabilities=probs, confidence=conf,
                                     low_confidence=conf < CONFIDENCE_FLOOR or bool(flagged), model=self.names[key],
                                     flags=flagged,
                                     source_m=None if emitted is not None else tuple(float(v) for v in out["src_m"][i])))
         return preds
+
+
+CHUNK = 8
+"""Frames :meth:`Classifier.predict_batch` answers at a time, each batch's chunks shared among
+threads (:func:`_pool`)."""
+
+
+def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images: np.ndarray | None) -> dict[str, np.ndarray]:
+    """A chunk of checked frames answered: the model's probabilities and what the flags need."""
+    batch, out = {}, {"clipped": clipped(raw)}
+    if s is not None:
+        f = echo_features(x, s, FS)
+        batch["envelope"], batch["bands"] = torch.as_tensor(f.envelope), torch.as_tensor(f.bands)
+        out["no_pulse"] = ~_begins_with(x, s) | ~_decays(x, s.shape[-1])
+    else:
+        out["no_pulse"] = ~_decays(x, int(PULSE_S * FS))
+    if images is not None:
+        batch["image"] = torch.as_tensor(images)
+    if "mel" in model.inputs:
+        batch["mel"] = torch.as_tensor(logmel(x, FS))
+    with torch.no_grad():
+        y = model(batch)
+    out.update(open=torch.softmax(y["open"], 1)[:, 1].numpy(), mirror=torch.softmax(y["material"], 1)[:, 1].numpy(),
+               depth_bin=torch.softmax(y["depth_bin"], 1).numpy(), depth_m=y["depth_m"].numpy(),
+               src_m=y["src_m"].numpy())
+    return out
+
+
+_THREADS = {"lock": threading.Lock(), "inside": 0, "saved": None, "pool": None}
+
+
+@contextlib.contextmanager
+def _few_threads():
+    """OpenMP's (torch's operators) and BLAS's pools held to one thread each while a prediction
+    runs, the caller's settings restored after (the last of concurrent callers restores them).
+    A frame's arrays are small: two threads per pool on two cores only wait for each other, and
+    wait long while another process keeps a core busy. Through threadpoolctl, never
+    ``torch.set_num_threads``: with 2 or more, torch 2.13's MKL batched solver fails after
+    (DLASWP) and spins for ever."""
+    with _THREADS["lock"]:
+        if not _THREADS["inside"]:
+            _THREADS["saved"] = _controller().limit(limits=1)
+        _THREADS["inside"] += 1
+    try:
+        yield
+    finally:
+        with _THREADS["lock"]:
+            _THREADS["inside"] -= 1
+            if not _THREADS["inside"]:
+                _THREADS["saved"].restore_original_limits()
+
+
+@functools.lru_cache(maxsize=1)
+def _controller() -> ThreadpoolController:
+    """The thread pools of the libraries loaded by now (scanned once, on first use: 0.3 ms)."""
+    return ThreadpoolController()
+
+
+def _pool() -> ThreadPoolExecutor:
+    """Threads that answer a batch's chunks side by side: one per CPU this process may use, at
+    most 4 (numpy's FFTs and products and torch release the GIL); made anew in a forked child,
+    which inherits none of its parent's threads."""
+    if _THREADS["pool"] is None:
+        cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        _THREADS["pool"] = ThreadPoolExecutor(max_workers=min(4, cpus), thread_name_prefix="vrecho-predict",
+                                              initializer=_one_openmp_thread)
+    return _THREADS["pool"]
+
+
+def _one_openmp_thread() -> None:
+    """A pool thread's own OpenMP setting (per thread: torch's operators read it), one thread."""
+    _controller().limit(limits=1, user_api="openmp")
+
+
+def _forget_threads() -> None:
+    """In a forked child: the parent's pool and lock state are not this process's."""
+    _THREADS.update(lock=threading.Lock(), inside=0, saved=None, pool=None)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_threads)
 
 
 def _check_flags(flags, n: int) -> list[tuple[str, ...]]:

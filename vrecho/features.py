@@ -114,7 +114,8 @@ def _window() -> np.ndarray:
 
 @functools.lru_cache(maxsize=1)
 def _mel_basis() -> np.ndarray:
-    return librosa.filters.mel(sr=FS, n_fft=N_FFT, n_mels=N_MELS, fmax=FS / 2)  # built once: 2 ms a call
+    """librosa's mel filters, (STFT bins, mel bands) float32 (built once: 2 ms a call)."""
+    return np.ascontiguousarray(librosa.filters.mel(sr=FS, n_fft=N_FFT, n_mels=N_MELS, fmax=FS / 2).T, np.float32)
 
 
 def check_emitted(emitted, fs, n_frames: int | None = None) -> np.ndarray:
@@ -193,18 +194,38 @@ def logmel(audio, fs: int = FS) -> np.ndarray:
     (62, 25)
     """
     x = check_frames(audio, fs)
-    # librosa's centred STFT (zero padding by N_FFT / 2, periodic Hann), framed by hand: the same
-    # numbers in a third of the time, which is most of a prediction's budget
-    padded = np.pad(x, [(0, 0)] * (x.ndim - 1) + [(N_FFT // 2, N_FFT // 2)])
+    batch = x.reshape(-1, x.shape[-1])
+    out = np.empty((len(batch), N_MELS, N_TIME), np.float32)
+    for i in range(0, len(batch), _LOGMEL_CHUNK):  # a few frames at a time: their STFT stays in cache
+        out[i:i + _LOGMEL_CHUNK] = _pooled_db(batch[i:i + _LOGMEL_CHUNK])
+    mean = out.mean(axis=(-2, -1), keepdims=True)
+    std = out.std(axis=(-2, -1), keepdims=True)
+    return ((out - mean) / np.maximum(std, 1e-6)).reshape(*x.shape[:-1], N_MELS, N_TIME)
+
+
+_LOGMEL_CHUNK = 4
+
+
+def _pooled_db(x: np.ndarray) -> np.ndarray:
+    """Mel power in dB of frames (B, n), pooled into :data:`N_TIME` bins: (B, 62, 25) float32.
+
+    librosa's centred STFT (zero padding by N_FFT / 2, periodic Hann), framed by hand, its
+    melspectrogram and ``power_to_db(ref=1, amin=1e-10)``: the same numbers (within float32's
+    rounding) in two thirds of the time, which is most of a prediction's budget."""
+    padded = np.pad(x, [(0, 0), (N_FFT // 2, N_FFT // 2)])
     frames = np.lib.stride_tricks.sliding_window_view(padded, N_FFT, axis=-1)[..., ::HOP, :]
-    power = np.abs(scipy.fft.rfft(frames * _window(), axis=-1)) ** 2
-    mel = np.einsum("...tf,mf->...mt", power, _mel_basis(), optimize=True)  # librosa's melspectrogram
-    db = librosa.power_to_db(mel, ref=1.0, amin=1e-10, top_db=None)
-    starts = np.array([g[0] for g in np.array_split(np.arange(db.shape[-1]), N_TIME)])
-    pooled = np.add.reduceat(db, starts, axis=-1) / np.diff(np.append(starts, db.shape[-1]))
-    mean = pooled.mean(axis=(-2, -1), keepdims=True)
-    std = pooled.std(axis=(-2, -1), keepdims=True)
-    return ((pooled - mean) / np.maximum(std, 1e-6)).astype(np.float32)
+    spectrum = scipy.fft.rfft(frames * _window(), axis=-1).view(np.float32)
+    power = spectrum[..., 0::2] ** 2 + spectrum[..., 1::2] ** 2
+    db = 10 * np.log10(np.maximum(power @ _mel_basis(), 1e-10))  # (B, STFT frames, mel bands)
+    starts, counts = _time_bins(db.shape[-2])
+    return (np.add.reduceat(db, starts, axis=-2) / counts[:, None]).transpose(0, 2, 1)
+
+
+@functools.lru_cache(maxsize=4)
+def _time_bins(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The first STFT frame of each of :data:`N_TIME` near-equal groups of ``n``, and their sizes."""
+    starts = np.array([g[0] for g in np.array_split(np.arange(n), N_TIME)])
+    return starts, np.diff(np.append(starts, n)).astype(np.float32)
 
 
 def echo_response(audio, emitted, fs: int = FS, *, length_s: float | None = ECHO_WINDOW_S,
@@ -407,3 +428,143 @@ def echo_at(audio, emitted, depth_m: float, fs: int = FS, *, window_m: float = 0
     path = c * float(parabolic_peaks(h, (p,))[0]) / FS
     level = 20 * np.log10(max(h[p], 1e-12) / max(h[direct], 1e-12)) + 20 * np.log10(path / MIC_ABOVE_EMITTER_M)
     return float(level), float(np.sqrt(max(path ** 2 - MIC_ABOVE_EMITTER_M ** 2, 0.0)) / 2)
+
+
+PLANE_TOLERANCE_M = 0.05
+"""How far the given distance to a surface's plane may be off (a scan's or a depth camera's
+plane: a few centimetres)."""
+RING_M = 1.0
+"""The echoes around a plane's delay that :func:`plane_echo` holds its echo against: this much
+path on either side."""
+
+
+@dataclass
+class PlaneEcho:
+    """The echo of a plane whose distance is known, per frame (:func:`plane_echo`).
+
+    Attributes
+    ----------
+    features : numpy.ndarray, shape (B, 6), float
+        In the whole band, then in 2 to 16 kHz: the strongest echo at the plane's delay over the
+        median of the echoes around it (:data:`RING_M` of path on either side), over the
+        strongest of them, and over the direct sound with spherical spreading undone (as if
+        the microphone sat on the loudspeaker), in dB of the envelope.
+    depth_m : numpy.ndarray, shape (B,), float
+        The distance that echo says, from the loudspeaker to the plane.
+    """
+
+    features: np.ndarray
+    depth_m: np.ndarray
+
+
+PLANE_BANDS_HZ = ((0.0, FS / 2), (2000.0, 16000.0))
+"""The bands :func:`plane_echo` reads: all of it, and where the direct sound rings least."""
+
+
+def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = PLANE_TOLERANCE_M) -> PlaneEcho:
+    """What the impulse response holds where a plane ``surface_m`` in front of the device
+    must echo.
+
+    The direct sound's delay gives the microphone's distance from the loudspeaker, r (in any
+    direction: the echo's path, loudspeaker to the plane's mirror image of it to the
+    microphone, lies between 2 d - r and 2 d + r), and d is ``surface_m`` within
+    ``tolerance_m``. The echo there is held against the room's other echoes at nearby delays
+    in the same frame, and against the direct sound (:class:`PlaneEcho`).
+
+    Parameters
+    ----------
+    audio : array_like, shape (n,) or (B, n), float
+        1 s frames starting at the pulse onset, n = round(``fs``) samples.
+    emitted : array_like, shape (k,) or (B, k), float
+        The emitted sound at the same rate.
+    surface_m : float or array_like, shape (B,)
+        Distance from the loudspeaker to the plane, in metres, per frame or for all.
+    fs : int
+        Sample rate in Hz (resampled to 44.1 kHz).
+    tolerance_m : float
+        How far ``surface_m`` may be off (default :data:`PLANE_TOLERANCE_M`).
+
+    Returns
+    -------
+    PlaneEcho
+        One row per frame.
+
+    Raises
+    ------
+    VrechoError
+        For frames :func:`check_frames` refuses, sounds :func:`check_emitted` refuses, or a
+        ``surface_m`` :func:`check_surface` refuses.
+
+    Examples
+    --------
+    The probe and a plane's echo 600 samples later (2.33 m away), asked about 2.3 m and 1.5 m:
+
+    >>> from vrecho.signals import probe
+    >>> frame = np.zeros(44_100, np.float32)
+    >>> frame[:4410] += probe()
+    >>> frame[600:5010] += 0.3 * probe()
+    >>> e = plane_echo(np.stack([frame, frame]), probe(), [2.3, 1.5])
+    >>> (e.features[:, 0] > 20).tolist(), round(float(e.depth_m[0]), 2)
+    ([True, False], 2.33)
+    """
+    x = check_frames(audio, fs)
+    x = x.reshape(-1, x.shape[-1])
+    d = check_surface(surface_m, len(x))
+    c = SPEED_OF_SOUND
+    ring = int(np.ceil(RING_M / c * FS))
+    n = min(int(np.ceil((2 * (d.max() + tolerance_m) + 0.3) / c * FS)) + ring + 8, FS)
+    spectrum = scipy.fft.rfft(echo_response(x, emitted, FS, length_s=None).astype(np.float64), axis=-1)
+    f = np.fft.rfftfreq(FS, 1 / FS)
+    gap = int(np.ceil(0.1 / c * FS))  # 10 cm of path kept clear between the window and the ring
+    features, depth = np.empty((len(x), 3 * len(PLANE_BANDS_HZ))), np.empty(len(x))
+    for b, (lo_hz, hi_hz) in enumerate(PLANE_BANDS_HZ):
+        h = scipy.fft.irfft(spectrum * ((f >= lo_hz) & (f <= hi_hz)), FS, axis=-1)[:, :n]
+        env = np.abs(scipy.signal.hilbert(h, axis=-1))
+        for i, e in enumerate(env):
+            t0 = int(np.argmax(e[:int(0.002 * FS)]))  # the direct sound: the microphone r from the loudspeaker
+            r = c * t0 / FS
+            lo = max(int(np.floor((2 * (d[i] - tolerance_m) - r) / c * FS)), t0 + gap)
+            hi = max(int(np.ceil((2 * (d[i] + tolerance_m) + r) / c * FS)), lo + 1)
+            p = lo + int(np.argmax(e[lo:hi + 1]))
+            around = np.concatenate([e[max(lo - gap - ring, t0 + gap):max(lo - gap, t0 + gap)], e[hi + gap:hi + gap + ring]])
+            path = c * float(parabolic_peaks(e, (p,))[0]) / FS
+            features[i, 3 * b:3 * b + 3] = 20 * np.log10(np.maximum(
+                [e[p] / max(float(np.median(around)), 1e-300), e[p] / max(float(around.max()), 1e-300),
+                 e[p] / max(float(e[t0]), 1e-300) * path / max(r, 0.01)], 1e-300))
+            if b == 0:
+                depth[i] = np.sqrt(max(path ** 2 - r ** 2, 0.0)) / 2
+    return PlaneEcho(features, depth)
+
+
+def check_surface(surface_m, n: int) -> np.ndarray:
+    """Distances to a surface's plane checked: finite, positive, at most 10 m; one per frame.
+
+    Parameters
+    ----------
+    surface_m : float or array_like, shape (n,)
+        Metres.
+    n : int
+        Frames.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,), float64
+
+    Raises
+    ------
+    VrechoError
+        Naming what is wrong.
+    """
+    try:
+        d = np.asarray(surface_m, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise VrechoError(f"surface_m: expected metres (a number, or one per frame), got {type(surface_m).__name__}") from None
+    if d.ndim > 1 or (d.ndim == 1 and len(d) != n):
+        raise VrechoError(f"surface_m: expected one distance, or one per frame ({n}), got shape {d.shape}")
+    if not np.all(np.isfinite(d)) or np.any(d <= 0) or np.any(d > MAX_SURFACE_M):
+        raise VrechoError(f"surface_m: expected finite distances above 0 and at most {MAX_SURFACE_M:g} m, "
+                          f"got {d.tolist()}")
+    return np.broadcast_to(d, (n,)).copy()
+
+
+MAX_SURFACE_M = 10.0
