@@ -466,6 +466,11 @@ def audio_cases(base: Path, m: dict) -> list[Case]:
     cases.append(Case("recordings", "predict: emitted empty", predict(one, fs, emitted=np.zeros(0))))
     cases.append(Case("recordings", "predict: image NaN", predict(one, fs, image=np.full((64, 25), np.nan))))
     cases.append(Case("recordings", "predict: image wrong shape", predict(one, fs, image=np.zeros((3, 3, 3, 3)))))
+    probe_ = __import__("vrecho").signals.probe()
+    for name, d in (("NaN", np.nan), ("0", 0.0), ("-1", -1.0), ("11 m", 11.0), ("inf", np.inf), ("a string", "far"),
+                    ("two for one frame", [1.0, 2.0])):
+        cases.append(Case("recordings", f"predict: surface_m {name}", predict(one, fs, emitted=probe_, surface_m=d)))
+    cases.append(Case("recordings", "predict: surface_m without emitted", predict(one, fs, surface_m=1.0)))
     # Recordings as files, through the capture command (no pulse train: one error; flagged rows otherwise).
     long_noise = 0.1 * rng.standard_normal(8 * fs)
     long_speech = long_noise * np.repeat(rng.random(320) > 0.5, fs // 40 + 1)[: 8 * fs]

@@ -121,6 +121,35 @@ def test_bad_audio_is_one_clear_error(clf, audio, fs, match):
         clf.predict(audio, fs)
 
 
+def test_surface_m_answers_open_closed_by_the_echo(clf, living_room_frames):
+    """With the surface's distance (2 cm off, as a scan's plane) and the probe, open/closed is
+    the echo at that delay or none: every one of the living room's 12 frames right (EchoCNN-E
+    alone: 10), a closed surface's depth within 1 cm."""
+    from vrecho.signals import probe
+
+    frames, _, truth = living_room_frames
+    depth = np.array([t[2] for t in truth])
+    preds = clf.predict_batch(frames, 44100, emitted=probe(), surface_m=depth + 0.02)
+    assert [p.is_open for p in preds] == [t[0] for t in truth]
+    assert all(abs(p.depth_m - t[2]) < 0.01 for p, t in zip(preds, truth) if not t[0])
+    assert all(p.model == "EchoCNN-E + echo at surface_m" for p in preds)
+    one = clf.predict(frames[0], 44100, emitted=probe(), surface_m=float(depth[0]))
+    assert one.is_open == truth[0][0]
+
+
+@pytest.mark.parametrize("surface_m, match", [
+    (float("nan"), "surface_m: expected finite"), (0.0, "surface_m: expected finite"), (-1.0, "surface_m: expected finite"),
+    (10.5, "at most 10 m"), ([1.0, 2.0], "one per frame"), ("far", "surface_m: expected"), ([[1.0]], "one per frame")])
+def test_bad_surface_m_is_one_clear_error(clf, living_room_frames, surface_m, match):
+    from vrecho.signals import probe
+
+    frames, _, _ = living_room_frames
+    with pytest.raises(VrechoError, match=match):
+        clf.predict_batch(frames[:3], 44100, emitted=probe(), surface_m=surface_m)
+    with pytest.raises(VrechoError, match="surface_m: needs emitted"):
+        clf.predict(frames[0], 44100, surface_m=1.0)
+
+
 def test_bad_image_and_emitted(clf, living_room_frames):
     frames, _, _ = living_room_frames
     with pytest.raises(VrechoError, match="64 x 25"):

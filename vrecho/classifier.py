@@ -38,7 +38,7 @@ import torch
 from threadpoolctl import ThreadpoolController
 
 from .errors import VrechoError
-from .features import BAND_FS, check_emitted, check_frames, clipped, echo_features, logmel
+from .features import BAND_FS, check_emitted, check_frames, check_surface, clipped, echo_features, logmel, plane_echo
 from .models import DEPTH_BINS_M, build
 from .signals import FS, MIN_COHERENCE, PULSE_S, analytic_envelope, analytic_filter, check_fs, coherence
 
@@ -128,7 +128,7 @@ class Classifier:
         for m in models.values():
             m.eval()
 
-    def predict(self, audio, fs: int, *, image=None, emitted=None) -> Prediction:
+    def predict(self, audio, fs: int, *, image=None, emitted=None, surface_m=None) -> Prediction:
         """What the surface in front of the device is, from one frame.
 
         Parameters
@@ -141,6 +141,10 @@ class Classifier:
             The camera crop, uint8, or float in [0, 1].
         emitted : array_like, shape (k,), float, optional
             The emitted sound, at ``fs``.
+        surface_m : float, optional
+            The distance from the loudspeaker to the surface's plane, as the scan or a depth
+            camera gives it (a few cm off), with ``emitted``: open/closed is then what
+            physics says, the echo at that delay or none (:meth:`predict_batch`).
 
         Returns
         -------
@@ -174,9 +178,9 @@ class Classifier:
             emitted = np.asarray(emitted)
             if emitted.ndim != 1:
                 raise VrechoError(f"emitted: expected a 1-D sound, got shape {emitted.shape}")
-        return self.predict_batch(x[None], fs, images=image, emitted=emitted)[0]
+        return self.predict_batch(x[None], fs, images=image, emitted=emitted, surface_m=surface_m)[0]
 
-    def predict_batch(self, audio, fs: int, *, images=None, emitted=None, flags=None) -> list[Prediction]:
+    def predict_batch(self, audio, fs: int, *, images=None, emitted=None, flags=None, surface_m=None) -> list[Prediction]:
         """Many frames at once, each answered as by :meth:`predict`.
 
         Answers that nothing vouches for are flagged (low-confidence, ``confidence`` at most
@@ -210,6 +214,14 @@ class Classifier:
             What the caller knows of each frame's origin, names of :data:`FLAGS` (a frame cut
             from a clipped or low-rate recording and resampled: ``vrecho capture``); flagged as
             those found here.
+        surface_m : float or array_like, shape (B,), optional
+            The distance from the loudspeaker to the surface's plane, per frame or for all
+            (the scan's or a depth camera's, within :data:`~vrecho.features.PLANE_TOLERANCE_M`),
+            with ``emitted``. Open/closed then comes from the echo where that plane must echo
+            (:func:`~vrecho.features.plane_echo`: held against the room's other echoes around
+            it and against the direct sound, whatever the loudspeaker's directivity or
+            gain), weighed by :data:`SURFACE_WEIGHTS`; a closed surface's depth is that
+            echo's. ``model`` then ends in " + echo at surface_m".
 
         Returns
         -------
@@ -244,12 +256,17 @@ class Classifier:
         if images is not None:
             images = _check_images(images, len(x))
             key += "V"
+        surface = None
+        if surface_m is not None:
+            if emitted is None:
+                raise VrechoError("surface_m: needs emitted, the sound whose echo is looked for at that distance")
+            surface = check_surface(surface_m, len(x))
         model = self.models[key]
         chunks = [slice(i, i + CHUNK) for i in range(0, len(x), CHUNK)]
 
         def answer(part: slice) -> dict[str, np.ndarray]:
             return _answer(model, x[part], raw[part], None if s is None else s if s.ndim == 1 else s[part],
-                           None if images is None else images[part])
+                           None if images is None else images[part], None if surface is None else surface[part])
 
         with _few_threads():
             parts = list(_pool().map(answer, chunks)) if len(chunks) > 1 else [answer(chunks[0])]
@@ -268,7 +285,8 @@ class Classifier:
             probs.update({f"depth_{d:g}": float(p) for d, p in zip(DEPTH_BINS_M, out["depth_bin"][i])})
             preds.append(Prediction(is_open=p_open > 0.5, material="mirror" if p_mirror > 0.5 else "glass",
                                     depth_m=float(out["depth_m"][i]), probabilities=probs, confidence=conf,
-                                    low_confidence=conf < CONFIDENCE_FLOOR or bool(flagged), model=self.names[key],
+                                    low_confidence=conf < CONFIDENCE_FLOOR or bool(flagged),
+                                    model=self.names[key] + ("" if surface is None else " + echo at surface_m"),
                                     flags=flagged,
                                     source_m=None if emitted is not None else tuple(float(v) for v in out["src_m"][i])))
         return preds
@@ -279,8 +297,10 @@ CHUNK = 8
 threads (:func:`_pool`)."""
 
 
-def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images: np.ndarray | None) -> dict[str, np.ndarray]:
-    """A chunk of checked frames answered: the model's probabilities and what the flags need."""
+def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images: np.ndarray | None,
+            surface: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """A chunk of checked frames answered: the model's probabilities and what the flags need;
+    with ``surface`` (and ``s``), open/closed and a closed surface's depth by the echo there."""
     batch, out = {}, {"clipped": clipped(raw)}
     if s is not None:
         f = echo_features(x, s, FS)
@@ -297,7 +317,19 @@ def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images:
     out.update(open=torch.softmax(y["open"], 1)[:, 1].numpy(), mirror=torch.softmax(y["material"], 1)[:, 1].numpy(),
                depth_bin=torch.softmax(y["depth_bin"], 1).numpy(), depth_m=y["depth_m"].numpy(),
                src_m=y["src_m"].numpy())
+    if surface is not None:
+        echo = plane_echo(x, s, surface, FS)
+        out["open"] = 1 / (1 + np.exp(echo.features @ np.array(SURFACE_WEIGHTS) + SURFACE_BIAS))
+        out["depth_m"] = np.where(out["open"] < 0.5, echo.depth_m, out["depth_m"])
     return out
+
+
+SURFACE_WEIGHTS = (-0.0251, 0.3033, 0.2651, 0.1099, -0.211, 0.5783)
+"""How :class:`~vrecho.features.PlaneEcho`'s features weigh toward closed (a logistic, with
+:data:`SURFACE_BIAS`), tuned by ``python3 benchmarks/bench_surface.py --fit`` on 480 frames of
+the envelope's reference, omni, offset, near floor, tilted and transducer conditions (seeds
+100 000 and up; never the benchmark's)."""
+SURFACE_BIAS = -0.7227
 
 
 _THREADS = {"lock": threading.Lock(), "inside": 0, "saved": None, "pool": None}
