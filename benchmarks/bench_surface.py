@@ -9,10 +9,11 @@ Frames of :func:`vrecho.sim.devices.echo_frame`: the user's own broadband probe
 Every row here is on seeds 200 000 + (rooms and devices never used for tuning).
 
 Per condition: frames, open/closed accuracy with ``surface_m`` (the physics), without it
-(EchoCNN-E, the shipped model, the same frames), the expected calibration error of the
-``surface_m`` answer's probability (10 bins), and the share of frames where another plane of
-the room (floor, ceiling, another wall) lies within the window the echo is looked for in: one
-microphone hears delays, not directions, so those frames are bounded by physics.
+(EchoCNN-E, the shipped model, the same frames with the probe known; EchoCNN-A, the paper's
+protocol, the probe unknown), the expected calibration error of each answer's probability (10
+bins), and the share of frames where another plane of the room (floor, ceiling, another wall)
+lies within the window the echo is looked for in: one microphone hears delays, not
+directions, so those frames are bounded by physics.
 
 Usage: ``python3 benchmarks/bench_surface.py [--frames 60] [--fit]``; ``--fit`` tunes the
 weights on the tuning seeds and conditions and prints them (to paste into the classifier).
@@ -90,30 +91,33 @@ def main() -> None:
     rows = frames(CONDITIONS, a.frames, 200_000, cache)
     print(f"open/closed across the envelope: {a.frames} frames per condition, seeds 200000+ (never tuned on); "
           f"surface_m = truth + N(0, {100 * SURFACE_ERROR_M:.0f} cm)\n")
-    print("| condition | tuned on | frames | open | with surface_m | without (EchoCNN-E) | calibration error | "
-          "another plane in the window | with surface_m, the others |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    pooled = {"with": [], "without": [], "p": [], "y": [], "amb": []}
+    print("| condition | tuned on | frames | open | with surface_m | EchoCNN-E | EchoCNN-A (probe unknown) | "
+          "calibration error: surface_m, E, A | another plane in the window | with surface_m, the others |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    keys = ("with", "without", "p", "y", "amb", "pe", "pa")
+    pooled = {k: [] for k in keys}
     for c in (*CONDITIONS, "all"):
         sel = rows if c == "all" else [r for r in rows if r[0].condition == c]
         if c == "all":
-            w, wo, p, y, amb = (np.concatenate(pooled[k]) for k in ("with", "without", "p", "y", "amb"))
+            w, wo, p, y, amb, pe, pa = (np.concatenate(pooled[k]) for k in keys)
         else:
             audio = np.stack([r[0].audio for r in sel])
             emitted = np.stack([r[0].emitted for r in sel])
             given = np.array([r[1] for r in sel])
             y = np.array([r[0].is_open for r in sel])
             with_s = clf.predict_batch(audio, 44100, emitted=emitted, surface_m=given)
-            without = clf.predict_batch(audio, 44100, emitted=emitted)
+            pe = np.array([q.probabilities["open"] for q in clf.predict_batch(audio, 44100, emitted=emitted)])
+            pa = np.array([q.probabilities["open"] for q in clf.predict_batch(audio, 44100)])
             p = np.array([q.probabilities["open"] for q in with_s])
             w = np.array([q.is_open for q in with_s]) == y
-            wo = np.array([q.is_open for q in without]) == y
+            wo = (pe > 0.5) == y
             amb = np.array([r[3] for r in sel])
-            for k, v in (("with", w), ("without", wo), ("p", p), ("y", y), ("amb", amb)):
+            for k, v in zip(keys, (w, wo, p, y, amb, pe, pa)):
                 pooled[k].append(v)
         clear = w[~amb].mean() if (~amb).any() else float("nan")
         print(f"| {c} | {'yes' if c in TUNING else 'no'} | {len(w)} | {np.mean(y):.0%} | {w.mean():.1%} | {wo.mean():.1%} "
-              f"| {ece(p, y):.1%} | {amb.mean():.0%} | {clear:.1%} |", flush=True)
+              f"| {np.mean((pa > 0.5) == y):.1%} | {ece(p, y):.1%}, {ece(pe, y):.1%}, {ece(pa, y):.1%} | {amb.mean():.0%} "
+              f"| {clear:.1%} |", flush=True)
 
 
 if __name__ == "__main__":
