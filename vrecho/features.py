@@ -445,7 +445,7 @@ class PlaneEcho:
     Attributes
     ----------
     features : numpy.ndarray, shape (B, 6), float
-        In the whole band, then in 2 to 16 kHz: the strongest echo at the plane's delay over the
+        In each band of :data:`PLANE_BANDS_HZ`: the strongest echo at the plane's delay over the
         median of the echoes around it (:data:`RING_M` of path on either side), over the
         strongest of them, and over the direct sound with spherical spreading undone (as if
         the microphone sat on the loudspeaker), in dB of the envelope.
@@ -457,8 +457,9 @@ class PlaneEcho:
     depth_m: np.ndarray
 
 
-PLANE_BANDS_HZ = ((0.0, FS / 2), (2000.0, 16000.0))
-"""The bands :func:`plane_echo` reads: all of it, and where the direct sound rings least."""
+PLANE_BANDS_HZ = ((300.0, 15000.0), (2000.0, 15000.0))
+"""The bands :func:`plane_echo` reads: what every probe and loudspeaker holds (AAC keeps to 15
+kHz and 16), and where the direct sound rings least."""
 
 
 def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = PLANE_TOLERANCE_M) -> PlaneEcho:
@@ -518,7 +519,7 @@ def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
     gap = int(np.ceil(0.1 / c * FS))  # 10 cm of path kept clear between the window and the ring
     features, depth = np.empty((len(x), 3 * len(PLANE_BANDS_HZ))), np.empty(len(x))
     for b, (lo_hz, hi_hz) in enumerate(PLANE_BANDS_HZ):
-        h = scipy.fft.irfft(spectrum * ((f >= lo_hz) & (f <= hi_hz)), FS, axis=-1)[:, :n]
+        h = scipy.fft.irfft(spectrum * _band(f, lo_hz, hi_hz), FS, axis=-1)[:, :n]
         env = np.abs(scipy.signal.hilbert(h, axis=-1))
         for i, e in enumerate(env):
             t0 = int(np.argmax(e[:int(0.002 * FS)]))  # the direct sound: the microphone r from the loudspeaker
@@ -534,6 +535,20 @@ def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
             if b == 0:
                 depth[i] = np.sqrt(max(path ** 2 - r ** 2, 0.0)) / 2
     return PlaneEcho(features, depth)
+
+
+PLANE_TAPER_HZ = 1000.0
+"""The raised-cosine edges of :data:`PLANE_BANDS_HZ`: a sharp band edge rings, and the direct
+sound's ringing (50 dB over a far echo where the microphone sits a centimetre from the
+loudspeaker) would cover the echo."""
+
+
+def _band(f: np.ndarray, lo_hz: float, hi_hz: float) -> np.ndarray:
+    """Weights of the band ``lo_hz`` to ``hi_hz`` over frequencies ``f``, with raised-cosine
+    edges :data:`PLANE_TAPER_HZ` wide inside it."""
+    up = np.clip((f - lo_hz) / PLANE_TAPER_HZ, 0, 1)
+    down = np.clip((hi_hz - f) / PLANE_TAPER_HZ, 0, 1)
+    return (0.5 - 0.5 * np.cos(np.pi * up)) * (0.5 - 0.5 * np.cos(np.pi * down))
 
 
 def check_surface(surface_m, n: int) -> np.ndarray:

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.signal
 
-from ..device import MIC_ABOVE_EMITTER_M, DevicePose
+from ..device import MIC_ABOVE_EMITTER_M
 from ..errors import VrechoError
 from ..signals import FS, random_probe
 from .acoustics import direct_amplitude, impulse_responses, record_pulse, recording_conditions
@@ -163,7 +163,10 @@ def echo_frame(rng: np.random.Generator, condition: str = "envelope", *, cache=N
     height, within PROTOCOL.md's 2.5 m, to reach the device where needed), 0.4 to 2.6 m above
     the floor (``"near floor"``: 0.4 to 0.6 m; ``"near ceiling"``: 0.2 to 0.4 m below it),
     turned up to 30 degrees off the normal and tilted up to 10 (``"tilted"``: 20 to 30)
-    degrees. The probe is the user's own (:func:`~vrecho.signals.random_probe`).
+    degrees. The probe is the user's own (:func:`~vrecho.signals.random_probe`). The room's
+    noise is at PROTOCOL.md's levels below the direct sound of the reference device (the
+    microphone 7 cm off the loudspeaker's side), whatever this device's microphone hears of
+    its own loudspeaker.
 
     Parameters
     ----------
@@ -221,12 +224,13 @@ def echo_frame(rng: np.random.Generator, condition: str = "envelope", *, cache=N
             continue
         axis = np.asarray(device.axis) @ frame
         ir = impulse_responses(scene, pose.emitter, mic[None], facing=axis, cache=cache)[0]
-        offset = mic - pose.emitter
-        r = float(np.linalg.norm(offset))
-        gain = device.emitter_p + (1 - device.emitter_p) * float(axis @ offset) / r
         probe = random_probe(rng)
         sent = _transducer(probe, device)
-        audio = record_pulse(ir, sent, direct_amplitude(r, gain), rng, *recording_conditions(rng))
+        # The room's noise is the room's: PROTOCOL.md's levels below the direct sound the
+        # reference device would hear (7 cm off the loudspeaker's side), whichever the microphone
+        # this device has; one a centimetre from its loudspeaker hears the room no louder.
+        audio = record_pulse(ir, sent, direct_amplitude(MIC_ABOVE_EMITTER_M, device.emitter_p), rng,
+                             *recording_conditions(rng))
         audio = audio * min(1.0, HEADROOM / float(np.abs(audio).max()))  # the input gain a device sets: no clipping
         audio = _limit(audio) if device.limiter else audio
         audio = _aac(audio) if device.aac else audio
