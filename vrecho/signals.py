@@ -401,9 +401,15 @@ def coherence(x: np.ndarray, env: np.ndarray, k: int) -> np.ndarray:
     numpy.ndarray [shape=(n - k + 1,)], float64
         0 where the window is silent.
     """
-    c = np.concatenate([[0.0], np.cumsum(x * x)])
+    peak = float(np.max(np.abs(x), initial=0.0))
+    if not np.isfinite(peak):
+        return np.zeros(env.size)
+    scale = 1.0 / peak if peak > 1.0 else 1.0  # a ratio: samples near float64's range would overflow squared
+    c = np.concatenate([[0.0], np.cumsum((x * scale) ** 2)])
     energy = np.sqrt(np.maximum(c[k:k + env.size] - c[:env.size], 0.0))
-    return np.divide(env, energy, out=np.zeros(env.size), where=energy > 1e-12 * max(float(energy.max()), 1e-300))
+    with np.errstate(over="ignore", invalid="ignore"):
+        return np.divide(env * scale, energy, out=np.zeros(env.size),
+                         where=(energy > 1e-12 * max(float(energy.max()), 1e-300)) & np.isfinite(env))
 
 
 def parabolic_peaks(y: np.ndarray, i: np.ndarray) -> np.ndarray:

@@ -358,15 +358,16 @@ class BoundaryMonitor:
             x = (x.astype(np.float32) - offset) / scale
         self._written += n
         staged = self._staged
-        if staged + n < _STAGE:  # small blocks wait for a few milliseconds' worth (the work is per block)
-            self._stage[staged:staged + n] = x
-            self._staged += n
-            return self._alert
-        if staged:
-            x = np.concatenate([self._stage[:staged], x.astype(np.float32, copy=False)])
-            n, self._staged = len(x), 0
-        else:
-            x = x.astype(np.float32, copy=True)
+        with np.errstate(over="ignore"):  # a float64 sample beyond float32's range is infinite: not finite, as NaN
+            if staged + n < _STAGE:  # small blocks wait for a few milliseconds' worth (the work is per block)
+                self._stage[staged:staged + n] = x
+                self._staged += n
+                return self._alert
+            if staged:
+                x = np.concatenate([self._stage[:staged], x.astype(np.float32, copy=False)])
+                n, self._staged = len(x), 0
+            else:
+                x = x.astype(np.float32, copy=True)
         flags = []
         valid = _TRUE[:n] if n <= len(_TRUE) else np.ones(n, bool)
         mag = np.abs(x)
