@@ -20,7 +20,10 @@ prints four tables and draws ``docs/cluster_throughput.png`` (frames per second 
    one process's over seeds: what changing the seed alone does);
 3. the mask network (8 channels wide, 16 rooms' walks, 4 epochs) in one process and on 2 Ray
    Train workers: examples per second and the last epoch's validation loss;
-4. a projection of 10 million frames on a 64-node cluster from the per-worker rate measured.
+4. the driver: units per second through ``cluster.run_rooms`` of tasks that do nothing, 1 000,
+   10 000 and 30 000 of them on a local cluster of this machine's CPUs (Ray's own cost per task and
+   the driver's loop, which a 10-million-frame run asks 62 500 times);
+5. a projection of 10 million frames on a 64-node cluster from the per-worker rate measured.
 
 Every Ray run here starts its own local cluster (``ray.init(num_cpus=N)``), shut down after.
 Absolute rates hold on the machine stated only.
@@ -100,6 +103,27 @@ def masknet_rate(data: Path, epochs: int, workers: int | None, base: Path) -> tu
     return n * epochs / (time.perf_counter() - t), float(losses[-1])
 
 
+def _nothing(i: int) -> None:
+    return None
+
+
+def driver_rate(n: int, cpus: int) -> float:
+    """Units per second through ``cluster.run_rooms`` of ``n`` tasks that do nothing."""
+    import ray
+
+    from vrecho.learn.cluster import run_rooms
+
+    ray.init(num_cpus=cpus, object_store_memory=1 << 30, include_dashboard=False, log_to_driver=False,
+             configure_logging=False)
+    try:
+        run_rooms("auto", _nothing, [0], lambda i: (i,), lambda i: None)  # the workers started
+        t = time.perf_counter()
+        run_rooms("auto", _nothing, list(range(n)), lambda i: (i,), lambda i: None, what="units")
+        return n / (time.perf_counter() - t)
+    finally:
+        ray.shutdown()
+
+
 def figure(rates: dict, path: Path) -> None:
     """Generation's frames per second against workers, both paths, and the ideal (linear from 1)."""
     import matplotlib
@@ -126,7 +150,12 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=1)
     ap.add_argument("--epochs", type=int, default=20)
     ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--driver-only", action="store_true", help="only the driver's table")
     a = ap.parse_args()
+    if a.driver_only:
+        for n in (1000, 10_000, 30_000):
+            print(f"| {n} | {driver_rate(n, os.cpu_count() or 1):.0f} |", flush=True)
+        return
     cores = os.cpu_count() or 1
     ns = sorted({1, 2, min(cores, 4), min(cores, 8), min(cores, 16)} & set(range(1, cores + 1)))
     with tempfile.TemporaryDirectory() as tmp:
@@ -165,6 +194,11 @@ def main() -> None:
         for label, w in (("one process", None), ("Ray Train, 2 workers (DDP)", 2)):
             rate, val = masknet_rate(base / "masknet", 4, w, base)
             print(f"| {label} | {rate:.1f} | {val:.2f} |", flush=True)
+        print(f"\ndriver: units that do nothing through run_rooms, a local cluster of {cores} CPUs\n")
+        print("| units | units/s |")
+        print("|---|---|")
+        for n in (1000, 10_000, 30_000):
+            print(f"| {n} | {driver_rate(n, cores):.0f} |", flush=True)
         per_worker = rates[1][1]
         eff = rates[max(ns)][1] / (max(ns) * per_worker)
         nodes, cores_per_node, frames = 64, 16, 10_000_000

@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from scipy.special import expit
 from threadpoolctl import ThreadpoolController
 
 from .errors import VrechoError
@@ -319,7 +320,7 @@ def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images:
                src_m=y["src_m"].numpy())
     if surface is not None:
         echo = plane_echo(x, s, surface, FS)
-        out["open"] = 1 / (1 + np.exp(echo.features @ np.array(SURFACE_WEIGHTS) + SURFACE_BIAS))
+        out["open"] = expit(-(echo.features @ np.array(SURFACE_WEIGHTS) + SURFACE_BIAS))
         out["depth_m"] = np.where(out["open"] < 0.5, echo.depth_m, out["depth_m"])
     return out
 

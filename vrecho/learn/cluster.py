@@ -7,12 +7,13 @@ store, no dashboard, token authentication off: it listens on this machine only);
 ADDRESS`` joins the user's running cluster (``ray start --head`` prints the address) as it is
 configured.
 
-Generation: each room is one Ray task (:func:`run_rooms`), run by whichever node is free, that
-writes the room's arrays and its resume marker to the dataset's folder itself (a folder every
-node sees: NFS or the like). Ray retries a task whose worker dies (:data:`RETRIES` times); a
-room that still fails is reported by number and left for a rerun, which does only what is
-missing, exactly as on one machine. A room's numbers follow from the seed and its index alone,
-so the arrays are the single-machine path's, bit for bit.
+Generation: each room is one Ray task (:func:`run_rooms`; :data:`IN_FLIGHT_PER_CPU` per CPU of
+the cluster at a time), run by whichever node is free, that writes the room's arrays and its
+resume marker to the dataset's folder itself (a folder every node sees: NFS or the like). Ray
+retries a task whose worker dies (:data:`RETRIES` times); a room that still fails is reported
+by number and left for a rerun, which does only what is missing, exactly as on one machine. A
+room's numbers follow from the seed and its index alone, so the arrays are the single-machine
+path's, bit for bit.
 
 Training: :func:`fit_on_ray` runs :func:`vrecho.learn.train.fit`'s loop as Ray Train's
 ``TorchTrainer`` (distributed data parallel): each worker reads its own shard of every batch
@@ -23,6 +24,7 @@ in the run folder, from which an interrupted run resumes.
 from __future__ import annotations
 
 import functools
+import itertools
 import os
 import socket
 import tempfile
@@ -35,6 +37,9 @@ from ..errors import VrechoError, check_count, check_number
 INSTALL = "pip install 'vrecho[ray]'"
 RETRIES = 3
 """How many times Ray reruns a room whose task failed (a worker or node lost, an error)."""
+IN_FLIGHT_PER_CPU = 4
+"""Rooms submitted per CPU of the cluster at a time (:func:`run_rooms`): enough to keep every
+worker busy, few enough that the driver's wait stays short."""
 OBJECT_STORE_BYTES = 1 << 30
 """A local cluster's object store (the rooms' arrays go to the folder, not through it)."""
 
@@ -165,15 +170,22 @@ def run_rooms(address: str, work: Callable, rooms: list[int], args: Callable[[in
     """
     ray = connect(address)
     task = ray.remote(num_cpus=1, max_retries=RETRIES, retry_exceptions=True)(_room_task)
-    pending = {task.remote(work, *args(i)): i for i in rooms}
+    # A bounded window of rooms in flight, refilled as they finish: each wait looks at the window,
+    # not at every room of the run (a million-frame run has tens of thousands).
+    window = max(8, IN_FLIGHT_PER_CPU * int(ray.cluster_resources().get("CPU", 1)))
+    queue = iter(rooms)
+    pending = {task.remote(work, *args(i)): i for i in itertools.islice(queue, window)}
     failed = {}
     # An interrupt leaves the rooms under way to end with this driver (its tasks die with it; a room
     # without its marker is done again by a rerun): force-cancelling them here raced their replies
     # and aborted Ray's core worker after vrecho's line (a failed check in its task manager).
     while pending:
         done, _ = ray.wait(list(pending), num_returns=1)
+        done, _ = ray.wait(list(pending), num_returns=len(pending), timeout=0)  # and any others finished
         for ref in done:
             i = pending.pop(ref)
+            for j in itertools.islice(queue, 1):
+                pending[task.remote(work, *args(j))] = j
             try:
                 ray.get(ref)
             except (ray.exceptions.RayError, OSError) as e:
