@@ -35,7 +35,7 @@ SURFACE_ERROR_M = 0.02
 
 def _frame(args):
     condition, seed, cache = args
-    from vrecho.features import PLANE_TOLERANCE_M, plane_echo
+    from vrecho.features import PLANE_TOLERANCE_M
     from vrecho.sim.devices import echo_frame
 
     rng = np.random.default_rng(seed)
@@ -43,7 +43,7 @@ def _frame(args):
     given = f.depth_m + rng.normal(0, SURFACE_ERROR_M)
     window = PLANE_TOLERANCE_M + float(np.linalg.norm(f.device.mic_m)) / 2
     ambiguous = any(abs(o - f.depth_m) <= window for o in f.others_m)
-    return f, given, plane_echo(f.audio, f.emitted, given).features[0], ambiguous
+    return f, given, ambiguous
 
 
 def frames(conditions, n: int, base: int, cache):
@@ -77,8 +77,11 @@ def main() -> None:
     if a.fit:
         from sklearn.linear_model import LogisticRegression
 
+        from vrecho.features import plane_echo
+
         rows = frames(TUNING, a.frames, 100_000, cache)
-        x = np.array([r[2] for r in rows])
+        x = plane_echo(np.stack([r[0].audio for r in rows]), np.stack([r[0].emitted for r in rows]),
+                       np.array([r[1] for r in rows])).features
         y = np.array([not r[0].is_open for r in rows])  # closed
         m = LogisticRegression(C=1.0, max_iter=2000).fit(x, y)
         print(f"tuned on {len(rows)} frames ({', '.join(TUNING)}; seeds 100000+): accuracy {m.score(x, y):.3f}")
@@ -111,7 +114,7 @@ def main() -> None:
             p = np.array([q.probabilities["open"] for q in with_s])
             w = np.array([q.is_open for q in with_s]) == y
             wo = (pe > 0.5) == y
-            amb = np.array([r[3] for r in sel])
+            amb = np.array([r[2] for r in sel])
             for k, v in zip(keys, (w, wo, p, y, amb, pe, pa)):
                 pooled[k].append(v)
         clear = w[~amb].mean() if (~amb).any() else float("nan")

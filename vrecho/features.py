@@ -277,17 +277,21 @@ def echo_response(audio, emitted, fs: int = FS, *, length_s: float | None = ECHO
     300
     """
     x = check_frames(audio, fs)
-    s = check_emitted(emitted, fs, None if x.ndim == 1 else len(x))
+    h = scipy.fft.irfft(_response_spectrum(x, check_emitted(emitted, fs, None if x.ndim == 1 else len(x)), regularization),
+                        x.shape[-1])
+    if length_s is not None:
+        h = h[..., :int(round(length_s * FS))]
+    return h.astype(np.float32)
+
+
+def _response_spectrum(x: np.ndarray, s: np.ndarray, regularization: float = 1e-3) -> np.ndarray:
+    """The spectrum of :func:`echo_response` of checked frames ``x`` and sounds ``s``."""
     n = x.shape[-1]
-    X = scipy.fft.rfft(x, n)
     if s.ndim == 1:  # one sound for every frame: its inverse filter, cached (a device repeats its probe)
         G = _cached_inverse_filter(s.tobytes(), n, regularization)
     else:
         G = _inverse_filter(s, n, regularization)
-    h = scipy.fft.irfft(X * G, n)
-    if length_s is not None:
-        h = h[..., :int(round(length_s * FS))]
-    return h.astype(np.float32)
+    return scipy.fft.rfft(x, n) * G
 
 
 def _inverse_filter(s: np.ndarray, n: int, regularization: float) -> np.ndarray:
@@ -514,7 +518,7 @@ def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
     c = SPEED_OF_SOUND
     ring = int(np.ceil(RING_M / c * FS))
     n = min(int(np.ceil((2 * (d.max() + tolerance_m) + 0.3) / c * FS)) + ring + 8, FS)
-    spectrum = scipy.fft.rfft(echo_response(x, emitted, FS, length_s=None).astype(np.float64), axis=-1)
+    spectrum = _response_spectrum(x, check_emitted(emitted, fs, len(x)))
     f = np.fft.rfftfreq(FS, 1 / FS)
     gap = int(np.ceil(0.1 / c * FS))  # 10 cm of path kept clear between the window and the ring
     features, depth = np.empty((len(x), 3 * len(PLANE_BANDS_HZ))), np.empty(len(x))
@@ -551,6 +555,10 @@ def _band(f: np.ndarray, lo_hz: float, hi_hz: float) -> np.ndarray:
     return (0.5 - 0.5 * np.cos(np.pi * up)) * (0.5 - 0.5 * np.cos(np.pi * down))
 
 
+MAX_SURFACE_M = 10.0
+"""The farthest a surface's plane may be given (:func:`check_surface`)."""
+
+
 def check_surface(surface_m, n: int) -> np.ndarray:
     """Distances to a surface's plane checked: finite, positive, at most 10 m; one per frame.
 
@@ -581,5 +589,3 @@ def check_surface(surface_m, n: int) -> np.ndarray:
                           f"got {d.tolist()}")
     return np.broadcast_to(d, (n,)).copy()
 
-
-MAX_SURFACE_M = 10.0

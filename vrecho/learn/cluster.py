@@ -181,7 +181,6 @@ def run_rooms(address: str, work: Callable, rooms: list[int], args: Callable[[in
     # and aborted Ray's core worker after vrecho's line (a failed check in its task manager).
     while pending:
         done, _ = ray.wait(list(pending), num_returns=1)
-        done, _ = ray.wait(list(pending), num_returns=len(pending), timeout=0)  # and any others finished
         for ref in done:
             i = pending.pop(ref)
             for j in itertools.islice(queue, 1):

@@ -149,13 +149,12 @@ def _load_examples(paths: list[Path], dev: str = "cpu", rank: int = 0, world: in
     for p in paths:
         with np.load(p) as z:
             for k in "fmt":
-                n, *rest = z[k].shape
-                shapes[k] = (shapes.get(k, (0,))[0] + n, *rest)
-            counts.append(len(z["f"]))
+                count, *shapes[k] = z[k].shape
+            counts.append(count)
     n = sum(counts)
     nv = max(8, n // 20)
     rows = {"train": np.arange(rank, n - nv, world)[:(n - nv) // world], "val": np.arange(n - nv, n)}
-    out = {(part, k): torch.empty((len(r), *shapes[k][1:]), dtype=torch.float16, device=dev)
+    out = {(part, k): torch.empty((len(r), *shapes[k]), dtype=torch.float16, device=dev)
            for part, r in rows.items() for k in "fmt"}
     at = 0
     for p, count in zip(paths, counts):
@@ -193,9 +192,10 @@ def _fit(model, train_set, val_set, *, epochs: int, lr: float, batch: int, seed:
     # a warm-up of 10 % of the steps; never of exactly one step, where OneCycleLR divides by zero
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, lr, total_steps=steps, pct_start=0.1 if steps != 10 else 0.2)
     state = {"epoch": 0, "losses": [], "seconds": 0.0}
+    config = {"epochs": epochs, "batch": batch, "examples": n, "lr": lr}
     if checkpoint is not None and Path(checkpoint).exists():
         saved = torch.load(checkpoint, map_location=dev, weights_only=False)
-        if saved.get("config") != {"epochs": epochs, "batch": batch, "examples": n, "lr": lr}:
+        if saved.get("config") != config:
             raise VrechoError(f"checkpoint {checkpoint} is another run's ({saved.get('config')}); remove it or choose another folder")
         model.load_state_dict(saved["state"])
         opt.load_state_dict(saved["opt"])
@@ -230,10 +230,9 @@ def _fit(model, train_set, val_set, *, epochs: int, lr: float, batch: int, seed:
         state = {"epoch": ep + 1, "losses": [*state["losses"], val], "seconds": time.time() - start}
         if checkpoint is not None:
             best = int(np.argmin(state["losses"]))
-            atomic_torch_save({**state, "config": {"epochs": epochs, "batch": batch, "examples": n, "lr": lr},
-                                "state": model.state_dict(), "opt": opt.state_dict(), "sched": sched.state_dict(),
-                                "stopped": state["epoch"] >= epochs, "best_state": None, "best_epoch": best,
-                                "best": state["losses"][best]}, Path(checkpoint))
+            atomic_torch_save({**state, "config": config, "state": model.state_dict(), "opt": opt.state_dict(),
+                               "sched": sched.state_dict(), "stopped": state["epoch"] >= epochs, "best_state": None,
+                               "best_epoch": best, "best": state["losses"][best]}, Path(checkpoint))
         if on_epoch is not None:
             on_epoch({"epoch": ep + 1, "val_loss": val, "stopped": ep + 1 >= epochs})
     return state["losses"]

@@ -271,7 +271,7 @@ def fit(model: EchoCNN, x_train: dict, y_train: dict, x_val: dict, y_val: dict, 
         state["seconds"] = time.time() - start
         if checkpoint is not None:
             atomic_torch_save({**state, "config": model.config, "state": model.state_dict(),
-                                "opt": opt.state_dict()}, checkpoint)
+                               "opt": opt.state_dict()}, checkpoint)
         if on_epoch is not None:
             on_epoch({"epoch": state["epoch"], "val_loss": val, "stopped": state["stopped"]})
     bar.close()
