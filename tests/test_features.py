@@ -58,3 +58,19 @@ def test_echo_response_recovers_delays_with_a_broadband_sound():
 def test_echo_response_needs_a_sound():
     with pytest.raises(VrechoError, match="silent"):
         echo_response(np.zeros(FS), np.zeros(4410), FS)
+
+
+def test_a_planes_echo_is_the_frames_own_whatever_its_batch():
+    """plane_echo reads each frame alone: the same features whether the frame is asked about
+    by itself or beside a frame asked about a plane 9 m away."""
+    from vrecho.features import plane_echo
+    from vrecho.signals import probe
+
+    frame = np.zeros(44_100, np.float32)
+    frame[:4410] += probe()
+    frame[600:5010] += 0.3 * probe()
+    frame += 1e-3 * np.random.default_rng(0).standard_normal(44_100).astype(np.float32)
+    alone = plane_echo(frame, probe(), 2.3)
+    beside = plane_echo(np.stack([frame, frame]), probe(), [2.3, 9.0])
+    assert np.allclose(alone.features[0], beside.features[0], atol=1e-6) and alone.depth_m[0] == beside.depth_m[0]
+    assert alone.features[0, 0] > 20

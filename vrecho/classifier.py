@@ -325,12 +325,12 @@ def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images:
     return out
 
 
-SURFACE_WEIGHTS = (-0.3525, 0.373, 0.1897, 0.4081, -0.3268, 0.5981)
+SURFACE_WEIGHTS = (-0.2645, 0.4088, 0.069, 0.3207, -0.3652, 0.7128)
 """How :class:`~vrecho.features.PlaneEcho`'s features weigh toward closed (a logistic, with
 :data:`SURFACE_BIAS`), tuned by ``python3 benchmarks/bench_surface.py --fit --frames 80`` on 480 frames of
 the envelope's reference, omni, offset, near floor, tilted and transducer conditions (seeds
 100 000 and up; never the benchmark's)."""
-SURFACE_BIAS = -0.3114
+SURFACE_BIAS = -0.3274
 
 
 _THREADS = {"lock": threading.Lock(), "inside": 0, "saved": None, "pool": None}

@@ -517,7 +517,8 @@ def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
     d = check_surface(surface_m, len(x))
     c = SPEED_OF_SOUND
     ring = int(np.ceil(RING_M / c * FS))
-    n = min(int(np.ceil((2 * (d.max() + tolerance_m) + 0.3) / c * FS)) + ring + 8, FS)
+    # one length for every frame, the farthest plane's (a frame's envelope must not depend on its batch)
+    n = min(int(np.ceil((2 * (MAX_SURFACE_M + tolerance_m) + 0.3) / c * FS)) + ring + 8, FS)
     spectrum = _response_spectrum(x, check_emitted(emitted, fs, len(x)))
     f = np.fft.rfftfreq(FS, 1 / FS)
     gap = int(np.ceil(0.1 / c * FS))  # 10 cm of path kept clear between the window and the ring
