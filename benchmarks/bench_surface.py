@@ -5,18 +5,25 @@ Frames of :func:`vrecho.sim.devices.echo_frame`: the user's own broadband probe
 (``random_probe``) passed as ``emitted``; ``surface_m`` the true distance plus a normal error of
 2 cm (a scan's plane). Conditions (:data:`vrecho.sim.devices.CONDITIONS`): those of
 :data:`TUNING` were used to tune :data:`vrecho.classifier.SURFACE_WEIGHTS` (``--fit``, seeds
-100 000 +); the others (bottom-firing, near ceiling, limiter, AAC, and all at once) never were.
-Every row here is on seeds 200 000 + (rooms and devices never used for tuning).
+100 000 +); :data:`HELD_OUT` (AAC, and all at once) never were. Every row here is on seeds
+200 000 + (rooms and devices never used for tuning).
+
+A second table pools the frames by the surface's distance. A third asks about walks
+(:func:`vrecho.sim.devices.echo_frames`, seeds 300 000 +, never tuned on): 6 frames of one
+device stepping about in front of one surface, each frame asked with its own distance (the
+scan's plane, off by a normal 2 cm for the walk, and the pose's, 5 mm per frame), the answers
+fused by :func:`vrecho.classifier.fuse_open` over the first 1, 3 and 6 frames.
 
 Per condition: frames, open/closed accuracy with ``surface_m`` (the physics), without it
 (EchoCNN-E, the shipped model, the same frames with the probe known; EchoCNN-A, the paper's
 protocol, the probe unknown), the expected calibration error of each answer's probability (10
-bins), and the share of frames where another plane of the room (floor, ceiling, another wall)
-lies within the window the echo is looked for in: one microphone hears delays, not
-directions, so those frames are bounded by physics.
+bins), and the share of frames where another echo of the room (an image source of order 1 to
+3 that never touches the surface: the floor, the ceiling, another wall, a corner of the
+surface's wall with one of them) arrives within the window the echo is looked for in (:func:`crowded`):
+one microphone hears delays, not directions, so those frames are bounded by physics.
 
-Usage: ``python3 benchmarks/bench_surface.py [--frames 60] [--fit]``; ``--fit`` tunes the
-weights on the tuning seeds and conditions and prints them (to paste into the classifier).
+Usage: ``python3 benchmarks/bench_surface.py [--frames 60] [--walks 20] [--fit]``; ``--fit`` tunes
+the weights on the tuning seeds and conditions and prints them (to paste into the classifier).
 """
 
 from __future__ import annotations
@@ -29,27 +36,49 @@ from multiprocessing import get_context
 
 import numpy as np
 
-TUNING = ("reference", "omni", "offset", "near floor", "tilted", "transducer")
+HELD_OUT = ("AAC", "envelope")
+TUNING = ("reference", "omni", "bottom-firing", "offset", "near floor", "near ceiling", "tilted", "transducer",
+          "limiter")
 SURFACE_ERROR_M = 0.02
+POSE_ERROR_M = 0.005
+WALK = 6
 
 
 def _frame(args):
     condition, seed, cache = args
-    from vrecho.features import PLANE_TOLERANCE_M
     from vrecho.sim.devices import echo_frame
 
     rng = np.random.default_rng(seed)
     f = echo_frame(rng, condition, cache=cache)
     given = f.depth_m + rng.normal(0, SURFACE_ERROR_M)
-    window = PLANE_TOLERANCE_M + float(np.linalg.norm(f.device.mic_m)) / 2
-    ambiguous = any(abs(o - f.depth_m) <= window for o in f.others_m)
-    return f, given, ambiguous
+    return f, given, crowded(f, given)
 
 
-def frames(conditions, n: int, base: int, cache):
+def crowded(f, given: float) -> bool:
+    """Whether another echo of the room (:attr:`~vrecho.sim.devices.EchoFrame.paths_m`) lies in
+    the window :func:`vrecho.features.plane_echo` looks in at the distance ``given``: path
+    2 (given -+ tolerance) -+ r, r the microphone's distance from the loudspeaker."""
+    from vrecho.features import PLANE_TOLERANCE_M
+
+    r = float(np.linalg.norm(f.device.mic_m))
+    lo, hi = 2 * (given - PLANE_TOLERANCE_M) - r, 2 * (given + PLANE_TOLERANCE_M) + r
+    return any(lo <= p <= hi for p in f.paths_m)
+
+
+def _walk(args):
+    condition, seed, cache = args
+    from vrecho.sim.devices import echo_frames
+
+    rng = np.random.default_rng(seed)
+    fs = echo_frames(rng, condition, WALK, cache=cache)
+    given = np.array([f.depth_m for f in fs]) + rng.normal(0, SURFACE_ERROR_M) + rng.normal(0, POSE_ERROR_M, WALK)
+    return fs, given
+
+
+def frames(conditions, n: int, base: int, cache, task=_frame):
     jobs = [(c, base + 1000 * k + i, cache) for k, c in enumerate(conditions) for i in range(n)]
     with get_context("spawn").Pool(min(2, os.cpu_count() or 1)) as pool:
-        return pool.map(_frame, jobs, chunksize=4)
+        return pool.map(task, jobs, chunksize=4 if task is _frame else 1)
 
 
 def ece(p: np.ndarray, y: np.ndarray, bins: int = 10) -> float:
@@ -71,6 +100,7 @@ def main() -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=60, help="frames per condition")
+    ap.add_argument("--walks", type=int, default=20, help="walks per condition")
     ap.add_argument("--fit", action="store_true", help="tune the weights on the tuning seeds and print them")
     a = ap.parse_args()
     cache = os.environ.get("VRECHO_CACHE") or tempfile.mkdtemp(prefix="vrecho-surface-")
@@ -83,7 +113,7 @@ def main() -> None:
         x = plane_echo(np.stack([r[0].audio for r in rows]), np.stack([r[0].emitted for r in rows]),
                        np.array([r[1] for r in rows])).features
         y = np.array([not r[0].is_open for r in rows])  # closed
-        m = LogisticRegression(C=1.0, max_iter=2000).fit(x, y)
+        m = LogisticRegression(C=0.1, max_iter=5000).fit(x, y)
         print(f"tuned on {len(rows)} frames ({', '.join(TUNING)}; seeds 100000+): accuracy {m.score(x, y):.3f}")
         print("SURFACE_WEIGHTS =", tuple(round(float(w), 4) for w in m.coef_[0]))
         print("SURFACE_BIAS =", round(float(m.intercept_[0]), 4))
@@ -95,14 +125,14 @@ def main() -> None:
     print(f"open/closed across the envelope: {a.frames} frames per condition, seeds 200000+ (never tuned on); "
           f"surface_m = truth + N(0, {100 * SURFACE_ERROR_M:.0f} cm)\n")
     print("| condition | tuned on | frames | open | with surface_m | EchoCNN-E | EchoCNN-A (probe unknown) | "
-          "calibration error: surface_m, E, A | another plane in the window | with surface_m, the others |")
+          "calibration error: surface_m, E, A | another echo in the window | with surface_m, the others |")
     print("|---|---|---|---|---|---|---|---|---|---|")
-    keys = ("with", "without", "p", "y", "amb", "pe", "pa")
+    keys = ("with", "without", "p", "y", "amb", "pe", "pa", "d")
     pooled = {k: [] for k in keys}
     for c in (*CONDITIONS, "all"):
         sel = rows if c == "all" else [r for r in rows if r[0].condition == c]
         if c == "all":
-            w, wo, p, y, amb, pe, pa = (np.concatenate(pooled[k]) for k in keys)
+            w, wo, p, y, amb, pe, pa, _ = (np.concatenate(pooled[k]) for k in keys)
         else:
             audio = np.stack([r[0].audio for r in sel])
             emitted = np.stack([r[0].emitted for r in sel])
@@ -115,12 +145,48 @@ def main() -> None:
             w = np.array([q.is_open for q in with_s]) == y
             wo = (pe > 0.5) == y
             amb = np.array([r[2] for r in sel])
-            for k, v in zip(keys, (w, wo, p, y, amb, pe, pa)):
+            d = np.array([r[0].depth_m for r in sel])
+            for k, v in zip(keys, (w, wo, p, y, amb, pe, pa, d)):
                 pooled[k].append(v)
         clear = w[~amb].mean() if (~amb).any() else float("nan")
-        print(f"| {c} | {'yes' if c in TUNING else 'no'} | {len(w)} | {np.mean(y):.0%} | {w.mean():.1%} | {wo.mean():.1%} "
+        tuned = "partly" if c == "all" else "no" if c in HELD_OUT else "yes"
+        print(f"| {c} | {tuned} | {len(w)} | {np.mean(y):.0%} | {w.mean():.1%} | {wo.mean():.1%} "
               f"| {np.mean((pa > 0.5) == y):.1%} | {ece(p, y):.1%}, {ece(pe, y):.1%}, {ece(pa, y):.1%} | {amb.mean():.0%} "
               f"| {clear:.1%} |", flush=True)
+    w, wo, p, y, amb, pe, pa, d = (np.concatenate(pooled[k]) for k in keys)
+    print("\nby the surface's distance, every condition pooled\n")
+    print("| distance | frames | another echo in the window | with surface_m | the others (no other echo in the window) | EchoCNN-E | calibration error, surface_m |")
+    print("|---|---|---|---|---|---|---|")
+    for lo, hi in ((0.25, 1.0), (1.0, 2.0), (2.0, 3.01)):
+        m = (d >= lo) & (d < hi)
+        print(f"| {lo:g} to {min(hi, 3):g} m | {m.sum()} | {amb[m].mean():.0%} | {w[m].mean():.1%} | {w[m & ~amb].mean():.1%} | {wo[m].mean():.1%} "
+              f"| {ece(p[m], y[m]):.1%} |", flush=True)
+    walks(clf, CONDITIONS, a.walks, cache)
+
+
+def walks(clf, conditions, n: int, cache) -> None:
+    """The walks' table: open/closed of each walk's surface from its first 1, 3 and :data:`WALK`
+    frames, fused."""
+    from vrecho.classifier import fuse_open
+
+    rows = frames(conditions, n, 300_000, cache, task=_walk)
+    audio = np.stack([f.audio for fs, _ in rows for f in fs])
+    emitted = np.stack([f.emitted for fs, _ in rows for f in fs])
+    preds = clf.predict_batch(audio, 44100, emitted=emitted, surface_m=np.concatenate([g for _, g in rows]))
+    preds = [preds[i:i + WALK] for i in range(0, len(preds), WALK)]
+    y = np.array([fs[0].is_open for fs, _ in rows])
+    cond = np.array([fs[0].condition for fs, _ in rows])
+    ks = (1, 3, WALK)
+    p = {k: np.array([fuse_open(q[:k]) for q in preds]) for k in ks}
+    print(f"\nwalks: {n} per condition of {WALK} frames in front of one surface (seeds 300000+, never tuned on), "
+          f"the answers fused (fuse_open) over the first 1, 3 and {WALK} frames\n")
+    print("| condition | walks | open | 1 frame | 3 frames | 6 frames | calibration error, 1 / 3 / 6 |")
+    print("|---|---|---|---|---|---|---|")
+    for c in (*conditions, "all"):
+        m = np.ones(len(y), bool) if c == "all" else cond == c
+        acc = " | ".join(f"{np.mean((p[k][m] > 0.5) == y[m]):.1%}" for k in ks)
+        print(f"| {c} | {m.sum()} | {y[m].mean():.0%} | {acc} | {' / '.join(f'{ece(p[k][m], y[m]):.1%}' for k in ks)} |",
+              flush=True)
 
 
 if __name__ == "__main__":

@@ -137,6 +137,24 @@ def test_surface_m_answers_open_closed_by_the_echo(clf, living_room_frames):
     assert one.is_open == truth[0][0]
 
 
+def test_frames_of_one_surface_fuse_into_one_answer(clf, living_room_frames):
+    """fuse_open: the living room's frames of each surface, asked with its distance, fused into
+    one open probability on the right side of a half; nothing, or something not a prediction,
+    is one error."""
+    from vrecho.classifier import fuse_open
+    from vrecho.signals import probe
+
+    frames, _, truth = living_room_frames
+    depth = np.array([t[2] for t in truth])
+    preds = clf.predict_batch(frames, 44100, emitted=probe(), surface_m=depth + 0.02)
+    for state in (True, False):
+        group = [p for p, t in zip(preds, truth) if t[0] == state]
+        assert group and (fuse_open(group) > 0.5) == state
+    for bad in ([], [0.3], None):
+        with pytest.raises(VrechoError, match="predictions: expected"):
+            fuse_open(bad)
+
+
 @pytest.mark.parametrize("surface_m, match", [
     (float("nan"), "surface_m: expected finite"), (0.0, "surface_m: expected finite"), (-1.0, "surface_m: expected finite"),
     (10.5, "at most 10 m"), ([1.0, 2.0], "one per frame"), ("far", "surface_m: expected"), ([[1.0]], "one per frame")])

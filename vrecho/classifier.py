@@ -325,12 +325,53 @@ def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images:
     return out
 
 
-SURFACE_WEIGHTS = (-0.2645, 0.4088, 0.069, 0.3207, -0.3652, 0.7128)
+SURFACE_WEIGHTS = (-0.3334, 0.0349, 0.4371, 0.4477, -0.0805, 0.0271)
 """How :class:`~vrecho.features.PlaneEcho`'s features weigh toward closed (a logistic, with
-:data:`SURFACE_BIAS`), tuned by ``python3 benchmarks/bench_surface.py --fit --frames 80`` on 480 frames of
-the envelope's reference, omni, offset, near floor, tilted and transducer conditions (seeds
-100 000 and up; never the benchmark's)."""
-SURFACE_BIAS = -0.3274
+:data:`SURFACE_BIAS`), tuned by ``python3 benchmarks/bench_surface.py --fit --frames 100`` on 900 frames of every
+condition of the envelope but AAC and all-at-once (seeds 100 000 and up; never the benchmark's)."""
+SURFACE_BIAS = -0.8326
+
+
+def fuse_open(predictions) -> float:
+    """The open probability of one surface heard in several frames, each asked with its own
+    ``surface_m`` (:meth:`Classifier.predict_batch`).
+
+    The mean of the frames' log-odds: the echo of a surface follows the device as it moves,
+    while another plane that shares its delay in one frame does not in the next, and a frame
+    where the room's other echoes crowd the window is outweighed by the others. Not a sum:
+    the frames of one walk share their room and device, so they are not independent
+    (``benchmarks/bench_surface.py`` measures the calibration of walks of 3 and 6 frames).
+
+    Parameters
+    ----------
+    predictions : sequence of Prediction
+        At least one.
+
+    Returns
+    -------
+    float
+        Probability that the surface is open.
+
+    Raises
+    ------
+    VrechoError
+        For no predictions, or something that is not one.
+
+    Examples
+    --------
+    >>> p = Prediction(True, "glass", 1.0, {"open": 0.9}, 0.9, False, "EchoCNN-E")
+    >>> q = Prediction(False, "glass", 1.0, {"open": 0.4}, 0.6, False, "EchoCNN-E")
+    >>> round(fuse_open([p, q]), 2)
+    0.71
+    """
+    try:
+        p = np.array([q.probabilities["open"] for q in predictions], np.float64)
+    except (TypeError, AttributeError, KeyError):
+        raise VrechoError("predictions: expected EchoCNN's predictions (Classifier.predict_batch)") from None
+    if not len(p):
+        raise VrechoError("predictions: expected at least one")
+    p = np.clip(p, 1e-9, 1 - 1e-9)
+    return float(expit(np.mean(np.log(p) - np.log1p(-p))))
 
 
 _THREADS = {"lock": threading.Lock(), "inside": 0, "saved": None, "pool": None}

@@ -7,7 +7,9 @@ edge), where its microphone sits (1 to 15 cm from the loudspeaker, any direction
 transducers' response (little output below 200 to 400 Hz, a resonance), automatic gain with a
 limiter, and AAC at 128 kbps. :func:`echo_frame` puts such a device in front of a
 discontinuity of a random room at any height from 0.4 to 2.6 m, tilted and turned up to 30
-degrees, and records one frame of the user's own broadband probe.
+degrees, and records one frame of the user's own broadband probe; :func:`echo_frames` records
+several as the device steps about in front of the same surface. Each frame carries the room's
+other echoes that could share its surface's delay (:func:`clutter_paths`).
 
 The named :data:`CONDITIONS` draw one property from its extreme and the rest as the reference
 device has them, so that a benchmark reports each on its own row; ``"envelope"`` draws all at
@@ -26,7 +28,7 @@ import scipy.signal
 from ..device import MIC_ABOVE_EMITTER_M
 from ..errors import VrechoError
 from ..signals import FS, random_probe
-from .acoustics import direct_amplitude, impulse_responses, record_pulse, recording_conditions
+from .acoustics import Simulation, build_room, direct_amplitude, impulse_responses, record_pulse, recording_conditions
 from .scenes import face, random_scene
 
 CONDITIONS = ("reference", "omni", "bottom-firing", "offset", "near floor", "near ceiling", "tilted", "transducer",
@@ -93,11 +95,14 @@ class EchoFrame:
         The emitter above the floor.
     ceiling_m : float
         The emitter below the ceiling.
-    others_m : tuple of float
-        The room's other planes as the echo sees them: the distance from the emitter to the
-        floor, the ceiling and each other wall whose perpendicular's foot lies on it, sorted
-        (a plane at the discontinuity's distance echoes at its delay: one microphone cannot
-        tell them apart).
+    paths_m : tuple of float
+        The room's echoes that never touch the discontinuity: the path, loudspeaker to
+        microphone, of each image source of order 1 to :data:`CLUTTER_ORDER` (pyroomacoustics'
+        image-source model of this room with the discontinuity made an opening) that keeps at
+        least :data:`CLUTTER_DAMPING` of its sound, sorted. One microphone cannot tell one of
+        these from the discontinuity's own echo where they share its delay (a corner of the
+        discontinuity's wall with the floor, the ceiling or a side wall echoes back almost as
+        the wall would).
     condition : str
         Of :data:`CONDITIONS`.
     device : Device
@@ -110,7 +115,7 @@ class EchoFrame:
     depth_m: float
     height_m: float
     ceiling_m: float
-    others_m: tuple
+    paths_m: tuple
     condition: str
     device: Device
 
@@ -187,6 +192,49 @@ def echo_frame(rng: np.random.Generator, condition: str = "envelope", *, cache=N
     VrechoError
         For an unknown condition, or no room and pose that fit after ``tries`` draws.
     """
+    return echo_frames(rng, condition, 1, cache=cache, tries=tries)[0]
+
+
+STEP_M = 0.4
+"""The most a walk of :func:`echo_frames` moves toward or away from its surface between frames."""
+
+
+def echo_frames(rng: np.random.Generator, condition: str = "envelope", n: int = 1, *, cache=None,
+                tries: int = 20) -> list[EchoFrame]:
+    """``n`` frames of one device walking about in front of one discontinuity.
+
+    The first frame is :func:`echo_frame`'s (the same draws: ``n=1`` is it). Each next one is
+    taken after a step of up to :data:`STEP_M` toward or away from the surface (its distance
+    kept within 0.25 to 3 m), up to 10 cm along it and 5 cm up or down, the device turned and
+    tilted afresh within the condition's range: the same room, device and probe, the room's
+    noise drawn anew. So a surface's echo moves with the device while the floor's, the
+    ceiling's and the other walls' move otherwise.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    condition : str
+        One of :data:`CONDITIONS`.
+    n : int
+        Frames (at least 1).
+    cache : path, bool or None
+        The impulse-response cache (:func:`~vrecho.sim.acoustics.impulse_responses`).
+    tries : int
+        Draws of the room and first pose before giving up (a device must fit in the room).
+
+    Returns
+    -------
+    list of EchoFrame
+        ``n`` of them, in the walk's order.
+
+    Raises
+    ------
+    VrechoError
+        For an unknown condition, ``n`` below 1, or no room and pose that fit after ``tries``
+        draws.
+    """
+    if int(n) != n or n < 1:
+        raise VrechoError(f"n: expected a whole number of frames, at least 1, got {n!r}")
     device = random_device(rng, condition)
     reference = condition == "reference"
     for _ in range(tries):
@@ -212,48 +260,100 @@ def echo_frame(rng: np.random.Generator, condition: str = "envelope", *, cache=N
         discs[index] = d
         scene = dataclasses.replace(scene, discontinuities=discs)
         tilt = rng.uniform(20, 30) * rng.choice([-1, 1]) if condition == "tilted" else rng.uniform(-10, 10)
-        try:
-            pose = face(scene, index, rng.uniform(0.25, 3.0), offset_u_m=rng.uniform(-1, 1) * max(d.width_m / 2 - 0.1, 0),
-                        offset_z_m=z - d.center_z_m, yaw_deg=rng.uniform(-30, 30), pitch_deg=tilt)
-        except VrechoError:
+        half = max(d.width_m / 2 - 0.1, 0)
+        dist, u = rng.uniform(0.25, 3.0), rng.uniform(-1, 1) * half
+        frame = _record(rng, scene, index, device, condition, None, cache, dist, u, z - d.center_z_m, rng.uniform(-30, 30), tilt)
+        if frame is None:
             continue  # the device would stand outside the room
-        left = np.cross(pose.up, pose.forward)
-        frame = np.stack([pose.forward, left, pose.up])  # device axes, one per row
-        mic = pose.emitter + np.asarray(device.mic_m) @ frame
-        if not scene.room.contains(np.stack([pose.emitter, mic])).all():
-            continue
-        axis = np.asarray(device.axis) @ frame
-        ir = impulse_responses(scene, pose.emitter, mic[None], facing=axis, cache=cache)[0]
-        probe = random_probe(rng)
-        sent = _transducer(probe, device)
-        # The room's noise is the room's: PROTOCOL.md's levels below the direct sound the
-        # reference device would hear (7 cm off the loudspeaker's side), whichever the microphone
-        # this device has; one a centimetre from its loudspeaker hears the room no louder.
-        audio = record_pulse(ir, sent, direct_amplitude(MIC_ABOVE_EMITTER_M, device.emitter_p), rng,
-                             *recording_conditions(rng))
-        audio = audio * min(1.0, HEADROOM / float(np.abs(audio).max()))  # the input gain a device sets: no clipping
-        audio = _limit(audio) if device.limiter else audio
-        audio = _aac(audio) if device.aac else audio
-        return EchoFrame(audio.astype(np.float32), probe, d.kind == "open", d.kind, scene.depth_m(pose),
-                         float(pose.emitter[2]), float(top - pose.emitter[2]), _other_planes(scene, pose.emitter, d.wall),
-                         condition, device)
+        frames = [frame]
+        while len(frames) < n:
+            for _ in range(tries):
+                step = float(np.clip(dist + rng.uniform(-STEP_M, STEP_M), 0.25, 3.0))
+                along = float(np.clip(u + rng.uniform(-0.1, 0.1), -half, half))
+                height = float(np.clip(z + rng.uniform(-0.05, 0.05), max(lo + 0.1, 0.3), min(hi - 0.1, top - 0.15)))
+                tilt = rng.uniform(20, 30) * rng.choice([-1, 1]) if condition == "tilted" else rng.uniform(-10, 10)
+                frame = _record(rng, scene, index, device, condition, frames[0].emitted, cache, step, along,
+                                height - d.center_z_m, rng.uniform(-30, 30), tilt)
+                if frame is not None:
+                    frames.append(frame)
+                    dist, u, z = step, along, height
+                    break
+            else:
+                raise VrechoError(f"echo_frames: no pose of the walk fits after {tries} draws")
+        return frames
     raise VrechoError(f"echo_frame: no room and pose fit after {tries} draws")
 
 
-def _other_planes(scene, emitter: np.ndarray, wall: int) -> tuple:
-    """Distances from ``emitter`` to the floor, the ceiling and every wall but ``wall`` whose
-    perpendicular's foot lies on it, sorted."""
-    out = [float(emitter[2]), float(scene.room.height_m - emitter[2])]
-    fp = scene.room.footprint
-    for i in range(len(fp)):
-        if i == wall:
-            continue
-        origin, along, normal = scene.room.wall_frame(i)
-        dist = float(np.dot(origin - emitter, normal))
-        u = float(np.dot(emitter + dist * normal - origin, along))
-        if dist > 0 and 0 <= u <= float(np.linalg.norm(fp[(i + 1) % len(fp)] - fp[i])):
-            out.append(dist)
-    return tuple(sorted(out))
+def _record(rng, scene, index, device: Device, condition: str, probe, cache, dist: float, u: float, dz: float,
+            yaw: float, tilt: float) -> EchoFrame | None:
+    """The frame ``device`` records at a pose facing discontinuity ``index`` (:func:`~.scenes.face`'s
+    arguments), its probe drawn where ``probe`` is None; None where the device would stand outside
+    the room."""
+    try:
+        pose = face(scene, index, dist, offset_u_m=u, offset_z_m=dz, yaw_deg=yaw, pitch_deg=tilt)
+    except VrechoError:
+        return None
+    left = np.cross(pose.up, pose.forward)
+    axes = np.stack([pose.forward, left, pose.up])  # device axes, one per row
+    mic = pose.emitter + np.asarray(device.mic_m) @ axes
+    if not scene.room.contains(np.stack([pose.emitter, mic])).all():
+        return None
+    d = scene.discontinuities[index]
+    ir = impulse_responses(scene, pose.emitter, mic[None], facing=np.asarray(device.axis) @ axes, cache=cache)[0]
+    probe = random_probe(rng) if probe is None else probe
+    sent = _transducer(probe, device)
+    # The room's noise is the room's: PROTOCOL.md's levels below the direct sound the
+    # reference device would hear (7 cm off the loudspeaker's side), whichever the microphone
+    # this device has; one a centimetre from its loudspeaker hears the room no louder.
+    audio = record_pulse(ir, sent, direct_amplitude(MIC_ABOVE_EMITTER_M, device.emitter_p), rng,
+                         *recording_conditions(rng))
+    audio = audio * min(1.0, HEADROOM / float(np.abs(audio).max()))  # the input gain a device sets: no clipping
+    audio = _limit(audio) if device.limiter else audio
+    audio = _aac(audio) if device.aac else audio
+    top = scene.room.height_m
+    return EchoFrame(audio.astype(np.float32), probe, d.kind == "open", d.kind, scene.depth_m(pose),
+                     float(pose.emitter[2]), float(top - pose.emitter[2]), clutter_paths(scene, index, pose.emitter, mic),
+                     condition, device)
+
+
+CLUTTER_ORDER = 3
+"""The highest reflection order :attr:`EchoFrame.paths_m` holds (the simulator's image sources
+go as far: :class:`~vrecho.sim.acoustics.Simulation`)."""
+CLUTTER_DAMPING = 0.3
+"""The least share of its sound (mean over the bands) an echo keeps to count in
+:attr:`EchoFrame.paths_m`."""
+
+
+def clutter_paths(scene, index: int, emitter, mic) -> tuple:
+    """The echoes of a scene that never touch discontinuity ``index`` (:attr:`EchoFrame.paths_m`).
+
+    The image sources of order 1 to :data:`CLUTTER_ORDER` of the room with the discontinuity
+    made an opening (absorbing all), as pyroomacoustics finds them (each reflection point within
+    its patch), that keep at least :data:`CLUTTER_DAMPING` of their sound.
+
+    Parameters
+    ----------
+    scene : vrecho.scene.Scene
+    index : int
+        The discontinuity.
+    emitter, mic : array_like, shape (3,)
+        The loudspeaker and the microphone, metres.
+
+    Returns
+    -------
+    tuple of float
+        The paths, loudspeaker to microphone, metres, sorted.
+    """
+    emitter, mic = np.asarray(emitter, np.float64), np.asarray(mic, np.float64)
+    discs = list(scene.discontinuities)
+    discs[index] = dataclasses.replace(discs[index], kind="open", absorption=(1.0,) * len(discs[index].absorption))
+    room = build_room(dataclasses.replace(scene, discontinuities=discs), sim=Simulation(max_order=CLUTTER_ORDER, n_rays=0))
+    room.add_source(emitter)
+    room.add_microphone(mic)
+    room.image_source_model()
+    src = room.sources[0]
+    keep = (src.orders > 0) & (src.damping.mean(axis=0) >= CLUTTER_DAMPING)
+    return tuple(sorted(float(v) for v in np.linalg.norm(src.images[:, keep] - mic[:, None], axis=0)))
 
 
 def _unit(rng: np.random.Generator) -> np.ndarray:
