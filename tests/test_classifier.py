@@ -109,6 +109,30 @@ def test_a_batch_is_its_frames_one_by_one_and_the_callers_threads_are_restored(c
     assert r.returncode == 0 and r.stdout.split()[-1] == "0.5" and "MKL ERROR" not in r.stderr, r.stderr[-500:]
 
 
+def test_folded_batch_norms_answer_as_the_saved_models():
+    """The shipped models with each batch norm folded into its convolution (_fused, at load)
+    answer as the saved models do, every head, within float32's rounding; none is left."""
+    from importlib import resources
+
+    from vrecho.models import build
+
+    clf = vrecho.load_classifier()
+    with resources.as_file(resources.files("vrecho.assets") / "echocnn.pt") as p:
+        saved = torch.load(p, weights_only=True)
+    g = torch.Generator().manual_seed(0)
+    batch = {"mel": torch.randn(4, 62, 25, generator=g), "image": torch.rand(4, 64, 25, generator=g),
+             "envelope": torch.rand(4, 1323, generator=g) + 0.01, "bands": -60 * torch.rand(4, 7, 20, generator=g)}
+    for key, entry in saved["models"].items():
+        plain = build(entry["config"])
+        plain.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in entry["state"].items()})
+        fused = clf.models[key]
+        assert not any(isinstance(m, (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d)) for m in fused.modules())
+        with torch.no_grad():
+            a, b = plain.eval()(batch), fused(batch)
+        for head in a:
+            assert torch.allclose(a[head], b[head], atol=1e-4, rtol=1e-4), (key, head)
+
+
 @pytest.mark.parametrize("audio, fs, match", [
     (np.zeros(1000), 44100, "44100 samples"),
     (np.full(44100, np.nan), 44100, "NaN"),

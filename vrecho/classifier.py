@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from torch.nn.utils.fusion import fuse_conv_bn_eval
 from scipy.special import expit
 from threadpoolctl import ThreadpoolController
 
@@ -197,8 +198,8 @@ class Classifier:
 
         While it runs, OpenMP (torch's operators) and BLAS are held to one thread each (a frame's arrays are
         too small to share out; two threads per pool on two cores only wait for each other),
-        and the caller's settings are restored after; the frames are answered in chunks of
-        :data:`CHUNK` on a thread per CPU, at most 4.
+        and the caller's settings are restored after; the frames are answered in
+        equal chunks of at most :data:`CHUNK` on a thread per CPU, at most 4.
 
         Parameters
         ----------
@@ -263,7 +264,10 @@ class Classifier:
                 raise VrechoError("surface_m: needs emitted, the sound whose echo is looked for at that distance")
             surface = check_surface(surface_m, len(x))
         model = self.models[key]
-        chunks = [slice(i, i + CHUNK) for i in range(0, len(x), CHUNK)]
+        threads = _pool()._max_workers
+        parts = min(len(x), threads * -(-len(x) // (threads * CHUNK)))  # a whole number of chunks per thread
+        edges = np.linspace(0, len(x), parts + 1).round().astype(int)
+        chunks = [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]
 
         def answer(part: slice) -> dict[str, np.ndarray]:
             return _answer(model, x[part], raw[part], None if s is None else s if s.ndim == 1 else s[part],
@@ -293,9 +297,10 @@ class Classifier:
         return preds
 
 
-CHUNK = 8
-"""Frames :meth:`Classifier.predict_batch` answers at a time, each batch's chunks shared among
-threads (:func:`_pool`)."""
+CHUNK = 32
+"""The most frames :meth:`Classifier.predict_batch` answers at a time: a batch is cut into equal
+chunks, as many per thread (:func:`_pool`) and as few as this allows (on this 2-core machine, 64
+frames as two chunks of 32 took EchoCNN-E 0.93 ms a frame, as eight of 8 1.12 ms)."""
 
 
 def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images: np.ndarray | None,
@@ -447,15 +452,22 @@ def _begins_with(x: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Whether each frame (B, n) begins with its emitted sound, ``s`` (k,) or (B, k) at 44.1 kHz:
     a window within :data:`PULSE_LAG_S` of the frame's start that the sound explains by
     :data:`~vrecho.signals.MIN_COHERENCE`."""
-    ss = np.broadcast_to(s, (len(x), s.shape[-1])).astype(np.float64)
-    k = ss.shape[1]
+    s = np.asarray(s, np.float32)
+    k = s.shape[-1]
     m = min(k + int(PULSE_LAG_S * FS), x.shape[1])
     n = 1 << int(np.ceil(np.log2(m + k)))
-    out = np.zeros(len(x), bool)
-    for i, (frame, sound) in enumerate(zip(x[:, :m].astype(np.float64), ss)):
-        env = analytic_envelope(frame, analytic_filter(sound, n), n)[:m - k + 1] / np.linalg.norm(sound)
-        out[i] = coherence(frame, env, k).max() >= MIN_COHERENCE
-    return out
+    frames = np.asarray(x[:, :m], np.float32)  # single precision: a threshold on a ratio, 1e-7 apart at most
+    kernel = _pulse_kernel(s.tobytes(), n) if s.ndim == 1 else np.stack([analytic_filter(one, n) for one in s])
+    norm = np.broadcast_to(np.linalg.norm(s.astype(np.float64), axis=-1), (len(x),))
+    env = analytic_envelope(frames, kernel, n)[:, :m - k + 1]  # one FFT pair for the batch
+    return np.array([coherence(f.astype(np.float64), e / q, k).max() >= MIN_COHERENCE
+                     for f, e, q in zip(frames, env, norm)], bool)
+
+
+@functools.lru_cache(maxsize=8)
+def _pulse_kernel(sound: bytes, n: int) -> np.ndarray:
+    """:func:`~vrecho.signals.analytic_filter` of a float32 sound, kept: a device repeats its probe."""
+    return analytic_filter(np.frombuffer(sound, np.float32), n)
 
 
 def _decays(x: np.ndarray, k: int) -> np.ndarray:
@@ -531,6 +543,29 @@ def load_classifier(path: str | Path | None = None) -> Classifier:
     return _load(path)
 
 
+def _fused(model: torch.nn.Module) -> torch.nn.Module:
+    """``model`` (in evaluation mode) with each convolution and the batch norm that follows it
+    folded into one convolution: the same answers within float32's rounding, less work per
+    frame (EchoCNN-E some 8 %).
+
+    The pairs are a module's ``conv<x>`` and ``norm<x>`` children, or the items of its ``convs``
+    and ``norms`` lists: every EchoCNN branch applies such a norm to its convolution's output
+    and to nothing else (:mod:`vrecho.models`).
+    """
+    convs, norms = (torch.nn.Conv1d, torch.nn.Conv2d), (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d)
+    for module in model.modules():
+        for name, conv in list(module.named_children()):
+            norm = getattr(module, "norm" + name[4:], None) if name.startswith("conv") else None
+            if isinstance(conv, convs) and isinstance(norm, norms):
+                setattr(module, name, fuse_conv_bn_eval(conv, norm))
+                setattr(module, "norm" + name[4:], torch.nn.Identity())
+            elif isinstance(conv, torch.nn.ModuleList) and isinstance(norm, torch.nn.ModuleList):
+                for i, (c, n) in enumerate(zip(conv, norm)):
+                    if isinstance(c, convs) and isinstance(n, norms):
+                        conv[i], norm[i] = fuse_conv_bn_eval(c, n), torch.nn.Identity()
+    return model
+
+
 def _load(path: Path) -> Classifier:
     try:
         saved = torch.load(path, weights_only=True)
@@ -543,7 +578,7 @@ def _load(path: Path) -> Classifier:
         names[key] = entry.get("name", _NAMES.get(key, key))
         model = build(entry["config"])
         model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in entry["state"].items()})
-        models[key] = model
+        models[key] = _fused(model.eval())
     if set(models) != set(_NAMES):
         raise VrechoError(f"classifier: {path} lacks models {sorted(set(_NAMES) - set(models))}")
     return Classifier(models, names=names)

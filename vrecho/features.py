@@ -58,9 +58,17 @@ def clipped(audio) -> np.ndarray:
         True where at least :data:`CLIP_SHARE` of a frame's samples reach :data:`CLIP_LEVEL`
         of full scale (of the frame's peak, where that exceeds 1).
     """
-    mag = np.abs(np.asarray(audio, np.float64))
-    peak = mag.max(axis=-1, keepdims=True) if mag.shape[-1] else np.ones(mag.shape[:-1] + (1,))
-    return np.mean(mag >= CLIP_LEVEL * np.maximum(peak, 1.0), axis=-1) >= CLIP_SHARE
+    x = np.asarray(audio)
+    out = np.zeros(x.shape[:-1], bool)
+    if not x.shape[-1]:
+        return out
+    peak = np.maximum(x.max(axis=-1), -x.min(axis=-1)).astype(np.float64)
+    near = peak >= CLIP_LEVEL  # below it no sample reaches the rail: most frames end here, at two passes
+    if np.any(near):
+        mag = np.abs(x[near] if x.dtype.kind == "f" else np.asarray(x[near], np.float64))  # |int16 min| overflows
+        rail = (CLIP_LEVEL * np.maximum(peak[near], 1.0)).astype(mag.dtype)
+        out[near] = np.count_nonzero(mag >= rail[..., None], axis=-1) >= CLIP_SHARE * x.shape[-1]
+    return out
 
 
 def check_frames(audio, fs) -> np.ndarray:
@@ -357,14 +365,21 @@ def echo_features(audio, emitted, fs: int = FS) -> EchoFeatures:
     # Band energies of 25 ms segments from their spectra (a Hann-windowed FFT per segment, 40 Hz
     # bins: the 125 Hz octave gets two), four times faster than octave filter banks per frame.
     bin_len = int(0.025 * FS)
-    seg = h[..., :20 * bin_len].reshape(*h.shape[:-1], 20, bin_len) * np.hanning(bin_len)
-    power = np.abs(scipy.fft.rfft(seg, axis=-1)) ** 2
-    f = np.fft.rfftfreq(bin_len, 1 / FS)
-    energies = [power[..., (f >= fc / np.sqrt(2)) & (f < fc * np.sqrt(2))].sum(axis=-1) for fc in DECAY_BANDS_HZ]
-    e = np.stack(energies, axis=-2)
+    window, bands = _band_sums(bin_len)
+    spec = scipy.fft.rfft(h[..., :20 * bin_len].reshape(*h.shape[:-1], 20, bin_len) * window, axis=-1)
+    e = np.swapaxes((spec.real ** 2 + spec.imag ** 2) @ bands, -1, -2)  # (..., 7, 20)
     db = 10 * np.log10(np.maximum(e, 1e-20))
     db -= db.max(axis=(-2, -1), keepdims=True)
     return EchoFeatures(envelope.astype(np.float32), np.maximum(db, -120).astype(np.float32))
+
+
+@functools.lru_cache(maxsize=2)
+def _band_sums(bin_len: int) -> tuple[np.ndarray, np.ndarray]:
+    """The Hann window of a segment of ``bin_len`` samples and the 0/1 matrix (bins, 7) that sums
+    its spectrum's power into the octaves of :data:`DECAY_BANDS_HZ`, single precision."""
+    f = np.fft.rfftfreq(bin_len, 1 / FS)
+    bands = np.stack([(f >= fc / np.sqrt(2)) & (f < fc * np.sqrt(2)) for fc in DECAY_BANDS_HZ], axis=1)
+    return np.hanning(bin_len).astype(np.float32), bands.astype(np.float32)
 
 
 def echo_at(audio, emitted, depth_m: float, fs: int = FS, *, window_m: float = 0.03) -> tuple[float, float]:

@@ -363,22 +363,22 @@ def analytic_envelope(x: np.ndarray, kernel: np.ndarray, n: int) -> np.ndarray:
 
     Parameters
     ----------
-    x : numpy.ndarray, shape (m,), float
-        The recording.
-    kernel : numpy.ndarray, shape (n // 2 + 1,), complex
-        :func:`analytic_filter` of the sound for the same ``n``.
+    x : numpy.ndarray, shape (..., m), float
+        The recording, or several.
+    kernel : numpy.ndarray, shape (..., n // 2 + 1), complex
+        :func:`analytic_filter` of the sound for the same ``n`` (one for all, or one each).
     n : int
-        FFT length in samples, at least len(x) + the sound's length.
+        FFT length in samples, at least m + the sound's length.
 
     Returns
     -------
-    numpy.ndarray, shape (n,), float
+    numpy.ndarray, shape (..., n), float
         The envelope by lag in samples.
     """
-    half = fft.rfft(x, n) * kernel
-    spec = np.zeros(n, half.dtype)
-    spec[:half.size] = half
-    return np.abs(fft.ifft(spec, overwrite_x=True))
+    half = fft.rfft(x, n, axis=-1) * kernel
+    spec = np.zeros(half.shape[:-1] + (n,), half.dtype)
+    spec[..., :half.shape[-1]] = half
+    return np.abs(fft.ifft(spec, axis=-1, overwrite_x=True))
 
 
 def coherence(x: np.ndarray, env: np.ndarray, k: int) -> np.ndarray:
