@@ -54,14 +54,18 @@ def _frame(args):
     return f, given, crowded(f, given)
 
 
-def crowded(f, given: float) -> bool:
+def crowded(f, given: float, toward: float | None = None) -> bool:
     """Whether another echo of the room (:attr:`~vrecho.sim.devices.EchoFrame.paths_m`) lies in
     the window :func:`vrecho.features.plane_echo` looks in at the distance ``given``: path
-    2 (given -+ tolerance) -+ r, r the microphone's distance from the loudspeaker."""
+    2 (given -+ tolerance) -+ r, r the microphone's distance from the loudspeaker; with the
+    microphone ``toward`` the plane known, sqrt(4 d^2 - 4 d a + r^2) for d = given -+ tolerance."""
     from vrecho.features import PLANE_TOLERANCE_M
 
     r = float(np.linalg.norm(f.device.mic_m))
-    lo, hi = 2 * (given - PLANE_TOLERANCE_M) - r, 2 * (given + PLANE_TOLERANCE_M) + r
+    if toward is None:
+        lo, hi = 2 * (given - PLANE_TOLERANCE_M) - r, 2 * (given + PLANE_TOLERANCE_M) + r
+    else:
+        lo, hi = (np.sqrt(4 * d * d - 4 * d * toward + r * r) for d in (given - PLANE_TOLERANCE_M, given + PLANE_TOLERANCE_M))
     return any(lo <= p <= hi for p in f.paths_m)
 
 
@@ -127,33 +131,45 @@ def main() -> None:
     print("| condition | tuned on | frames | open | with surface_m | EchoCNN-E | EchoCNN-A (probe unknown) | "
           "calibration error: surface_m, E, A | another echo in the window | with surface_m, the others |")
     print("|---|---|---|---|---|---|---|---|---|---|")
-    keys = ("with", "without", "p", "y", "amb", "pe", "pa", "d")
+    keys = ("with", "without", "p", "y", "amb", "pe", "pa", "d", "wg", "pg", "ambg")
     pooled = {k: [] for k in keys}
+    geometry = []
     for c in (*CONDITIONS, "all"):
         sel = rows if c == "all" else [r for r in rows if r[0].condition == c]
         if c == "all":
-            w, wo, p, y, amb, pe, pa, _ = (np.concatenate(pooled[k]) for k in keys)
+            w, wo, p, y, amb, pe, pa, _, wg, pg, ambg = (np.concatenate(pooled[k]) for k in keys)
         else:
             audio = np.stack([r[0].audio for r in sel])
             emitted = np.stack([r[0].emitted for r in sel])
             given = np.array([r[1] for r in sel])
+            toward = np.array([r[0].mic_toward_m for r in sel])
             y = np.array([r[0].is_open for r in sel])
             with_s = clf.predict_batch(audio, 44100, emitted=emitted, surface_m=given)
+            with_g = clf.predict_batch(audio, 44100, emitted=emitted, surface_m=given, mic_toward_surface_m=toward)
             pe = np.array([q.probabilities["open"] for q in clf.predict_batch(audio, 44100, emitted=emitted)])
             pa = np.array([q.probabilities["open"] for q in clf.predict_batch(audio, 44100)])
             p = np.array([q.probabilities["open"] for q in with_s])
-            w = np.array([q.is_open for q in with_s]) == y
+            pg = np.array([q.probabilities["open"] for q in with_g])
+            w, wg = (p > 0.5) == y, (pg > 0.5) == y
             wo = (pe > 0.5) == y
             amb = np.array([r[2] for r in sel])
+            ambg = np.array([crowded(r[0], r[1], r[0].mic_toward_m) for r in sel])
             d = np.array([r[0].depth_m for r in sel])
-            for k, v in zip(keys, (w, wo, p, y, amb, pe, pa, d)):
+            for k, v in zip(keys, (w, wo, p, y, amb, pe, pa, d, wg, pg, ambg)):
                 pooled[k].append(v)
         clear = w[~amb].mean() if (~amb).any() else float("nan")
         tuned = "partly" if c == "all" else "no" if c in HELD_OUT else "yes"
         print(f"| {c} | {tuned} | {len(w)} | {np.mean(y):.0%} | {w.mean():.1%} | {wo.mean():.1%} "
               f"| {np.mean((pa > 0.5) == y):.1%} | {ece(p, y):.1%}, {ece(pe, y):.1%}, {ece(pa, y):.1%} | {amb.mean():.0%} "
               f"| {clear:.1%} |", flush=True)
-    w, wo, p, y, amb, pe, pa, d = (np.concatenate(pooled[k]) for k in keys)
+        geometry.append(f"| {c} | {len(w)} | {wg.mean():.1%} | {ece(pg, y):.1%} | {ambg.mean():.0%} "
+                        f"| {wg[~ambg].mean() if (~ambg).any() else float('nan'):.1%} |")
+    print("\nwith the microphone's place on the device and the device's pose known (mic_toward_surface_m, "
+          "as a scan knows them): the same frames\n")
+    print("| condition | frames | with surface_m | calibration error | another echo in the window | the others |")
+    print("|---|---|---|---|---|---|")
+    print("\n".join(geometry), flush=True)
+    w, wo, p, y, amb, pe, pa, d, *_ = (np.concatenate(pooled[k]) for k in keys)
     print("\nby the surface's distance, every condition pooled\n")
     print("| distance | frames | another echo in the window | with surface_m | the others (no other echo in the window) | EchoCNN-E | calibration error, surface_m |")
     print("|---|---|---|---|---|---|---|")

@@ -471,6 +471,14 @@ def audio_cases(base: Path, m: dict) -> list[Case]:
                     ("two for one frame", [1.0, 2.0])):
         cases.append(Case("recordings", f"predict: surface_m {name}", predict(one, fs, emitted=probe_, surface_m=d)))
     cases.append(Case("recordings", "predict: surface_m without emitted", predict(one, fs, surface_m=1.0)))
+    for name, v in (("0", 0.0), ("1 m", 1.0), ("NaN", np.nan), ("a string", "5 cm"), ("True", True)):
+        cases.append(Case("recordings", f"predict: surface_tolerance_m {name}",
+                          predict(one, fs, emitted=probe_, surface_m=1.0, surface_tolerance_m=v)))
+    for name, v in (("NaN", np.nan), ("1 m", 1.0), ("-inf", -np.inf), ("a string", "up"), ("two for one frame", [0.0, 0.1])):
+        cases.append(Case("recordings", f"predict: mic_toward_surface_m {name}",
+                          predict(one, fs, emitted=probe_, surface_m=1.0, mic_toward_surface_m=v)))
+    cases.append(Case("recordings", "predict: mic_toward_surface_m without surface_m",
+                      predict(one, fs, emitted=probe_, mic_toward_surface_m=0.0)))
     # Recordings as files, through the capture command (no pulse train: one error; flagged rows otherwise).
     long_noise = 0.1 * rng.standard_normal(8 * fs)
     long_speech = long_noise * np.repeat(rng.random(320) > 0.5, fs // 40 + 1)[: 8 * fs]

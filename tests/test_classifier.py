@@ -192,6 +192,36 @@ def test_bad_surface_m_is_one_clear_error(clf, living_room_frames, surface_m, ma
         clf.predict(frames[0], 44100, surface_m=1.0)
 
 
+@pytest.mark.parametrize("kw, match", [
+    ({"surface_tolerance_m": 0.0}, "surface_tolerance_m"), ({"surface_tolerance_m": 0.6}, "surface_tolerance_m"),
+    ({"surface_tolerance_m": float("nan")}, "surface_tolerance_m"), ({"surface_tolerance_m": "5 cm"}, "surface_tolerance_m"),
+    ({"mic_toward_surface_m": 0.6}, "mic_toward_surface_m: expected finite"),
+    ({"mic_toward_surface_m": float("inf")}, "mic_toward_surface_m: expected finite"),
+    ({"mic_toward_surface_m": [0.0, 0.0]}, "one per frame"), ({"mic_toward_surface_m": "up"}, "mic_toward_surface_m")])
+def test_bad_window_is_one_clear_error(clf, living_room_frames, kw, match):
+    from vrecho.signals import probe
+
+    frames, _, _ = living_room_frames
+    with pytest.raises(VrechoError, match=match):
+        clf.predict_batch(frames[:3], 44100, emitted=probe(), surface_m=1.0, **kw)
+    with pytest.raises(VrechoError, match="mic_toward_surface_m: needs surface_m"):
+        clf.predict(frames[0], 44100, emitted=probe(), mic_toward_surface_m=0.0)
+
+
+def test_the_devices_geometry_narrows_the_window(clf, living_room_frames):
+    """With the microphone's offset toward the surface known (the living room's device faces each
+    surface squarely, its microphone 7 cm above the loudspeaker: 0) and a scan's 3 cm, every
+    frame is still right and a closed surface's depth within 1 cm."""
+    from vrecho.signals import probe
+
+    frames, _, truth = living_room_frames
+    depth = np.array([t[2] for t in truth])
+    preds = clf.predict_batch(frames, 44100, emitted=probe(), surface_m=depth + 0.02, surface_tolerance_m=0.03,
+                              mic_toward_surface_m=0.0)
+    assert [p.is_open for p in preds] == [t[0] for t in truth]
+    assert all(abs(p.depth_m - t[2]) < 0.01 for p, t in zip(preds, truth) if not t[0])
+
+
 def test_bad_image_and_emitted(clf, living_room_frames):
     frames, _, _ = living_room_frames
     with pytest.raises(VrechoError, match="64 x 25"):

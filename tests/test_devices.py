@@ -19,6 +19,8 @@ def test_each_condition_draws_what_it_names(tmp_path):
         assert f.condition == c and len(f.paths_m) >= 5 and min(f.paths_m) > 0  # floor, ceiling, walls at least
         seen[c] = f
     assert seen["reference"].device == Device()
+    assert abs(seen["reference"].mic_toward_m) <= 0.07 * np.sin(np.radians(10)) + 1e-9  # 7 cm up, tilted 10 degrees at most
+    assert abs(seen["offset"].mic_toward_m) <= np.linalg.norm(seen["offset"].device.mic_m) + 1e-9
     assert seen["omni"].device.emitter_p == 1.0
     assert seen["bottom-firing"].device.axis == (0.0, 0.0, -1.0)
     assert 0.1 <= np.linalg.norm(seen["offset"].device.mic_m) <= 0.15

@@ -34,8 +34,8 @@ def _peak_time(h: np.ndarray, lo: int, hi: int) -> float:
 
 @pytest.mark.parametrize("depth", DEPTHS_M)
 def test_echo_delay_and_opening_energy(depth, tmp_path):
-    from vrecho.features import echo_at
-    from vrecho.reconstruct.decide import ECHO_CLOSED_DB
+    from vrecho.classifier import SURFACE_BIAS, SURFACE_WEIGHTS
+    from vrecho.features import plane_echo
 
     sound = probe()
     energies, levels = {}, {}
@@ -52,7 +52,9 @@ def test_echo_delay_and_opening_energy(depth, tmp_path):
         centre = int(round(t_direct + expected))
         window = slice(centre - half, centre + half + 1)
         energies[kind] = float(np.sum(h[window] ** 2))
-        levels[kind], measured = echo_at(frame, sound, depth + 0.02)  # the scan's plane, 2 cm off
+        echo = plane_echo(frame, sound, depth + 0.02)  # the scan's plane, 2 cm off
+        levels[kind] = float(echo.features[0] @ np.array(SURFACE_WEIGHTS) + SURFACE_BIAS)  # log-odds of closed
+        measured = float(echo.depth_m[0])
         if kind == "glass":
             assert abs(measured - depth) < 0.01
             t_echo = _peak_time(h, centre - half, centre + half + 1)
@@ -63,7 +65,7 @@ def test_echo_delay_and_opening_energy(depth, tmp_path):
             assert abs(t_echo / FS - 2 * depth / SPEED_OF_SOUND) < 0.2e-3
             assert abs((t_echo - t_direct) - expected) / FS < 0.03e-3  # a sub-sample read of the echo
     assert 10 * np.log10(energies["glass"] / energies["open"]) >= 10.0
-    assert levels["glass"] > ECHO_CLOSED_DB > levels["open"], levels  # the repair's open/closed echo test
+    assert levels["glass"] > 0 > levels["open"], levels  # predict(..., surface_m=): the repair's open/closed echo test
 
 
 def test_headset_array_hears_each_microphone_at_its_distance(tmp_path):

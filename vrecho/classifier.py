@@ -39,8 +39,9 @@ from torch.nn.utils.fusion import fuse_conv_bn_eval
 from scipy.special import expit
 from threadpoolctl import ThreadpoolController
 
-from .errors import VrechoError
-from .features import BAND_FS, check_emitted, check_frames, check_surface, clipped, echo_features, logmel, plane_echo
+from .errors import VrechoError, check_number
+from .features import (BAND_FS, PLANE_TOLERANCE_M, check_emitted, check_frames, check_mic_toward, check_surface, clipped,
+                       echo_features, logmel, plane_echo)
 from .models import DEPTH_BINS_M, build
 from .signals import FS, MIN_COHERENCE, PULSE_S, analytic_envelope, analytic_filter, check_fs, coherence
 
@@ -130,7 +131,8 @@ class Classifier:
         for m in models.values():
             m.eval()
 
-    def predict(self, audio, fs: int, *, image=None, emitted=None, surface_m=None) -> Prediction:
+    def predict(self, audio, fs: int, *, image=None, emitted=None, surface_m=None,
+                surface_tolerance_m: float = PLANE_TOLERANCE_M, mic_toward_surface_m=None) -> Prediction:
         """What the surface in front of the device is, from one frame.
 
         Parameters
@@ -147,6 +149,10 @@ class Classifier:
             The distance from the loudspeaker to the surface's plane, as the scan or a depth
             camera gives it (a few cm off), with ``emitted``: open/closed is then what
             physics says, the echo at that delay or none (:meth:`predict_batch`).
+        surface_tolerance_m : float
+            How far ``surface_m`` may be off (:meth:`predict_batch`).
+        mic_toward_surface_m : float, optional
+            The microphone's offset from the loudspeaker toward the surface (:meth:`predict_batch`).
 
         Returns
         -------
@@ -180,9 +186,11 @@ class Classifier:
             emitted = np.asarray(emitted)
             if emitted.ndim != 1:
                 raise VrechoError(f"emitted: expected a 1-D sound, got shape {emitted.shape}")
-        return self.predict_batch(x[None], fs, images=image, emitted=emitted, surface_m=surface_m)[0]
+        return self.predict_batch(x[None], fs, images=image, emitted=emitted, surface_m=surface_m,
+                                  surface_tolerance_m=surface_tolerance_m, mic_toward_surface_m=mic_toward_surface_m)[0]
 
-    def predict_batch(self, audio, fs: int, *, images=None, emitted=None, flags=None, surface_m=None) -> list[Prediction]:
+    def predict_batch(self, audio, fs: int, *, images=None, emitted=None, flags=None, surface_m=None,
+                      surface_tolerance_m: float = PLANE_TOLERANCE_M, mic_toward_surface_m=None) -> list[Prediction]:
         """Many frames at once, each answered as by :meth:`predict`.
 
         Answers that nothing vouches for are flagged (low-confidence, ``confidence`` at most
@@ -224,6 +232,16 @@ class Classifier:
             it and against the direct sound, whatever the loudspeaker's directivity or
             gain), weighed by :data:`SURFACE_WEIGHTS`; a closed surface's depth is that
             echo's. ``model`` then ends in " + echo at surface_m".
+        surface_tolerance_m : float
+            How far ``surface_m`` may be off, in metres, 1 mm to 0.5 m
+            (:data:`~vrecho.features.PLANE_TOLERANCE_M`, 5 cm, by default; a scan that knows its
+            planes better narrows the window, and fewer of the room's other echoes share it).
+        mic_toward_surface_m : float or array_like, shape (B,), optional
+            How far the microphone sits from the loudspeaker toward the surface (along the
+            plane's normal; negative behind), per frame or for all, where the device's geometry
+            and pose are known (a scan knows both): the echo is then looked for at its exact
+            path (:func:`~vrecho.features.plane_echo`), not anywhere within the microphone's
+            distance of twice ``surface_m``. Within 0.5 m; with ``surface_m`` only.
 
         Returns
         -------
@@ -258,11 +276,15 @@ class Classifier:
         if images is not None:
             images = _check_images(images, len(x))
             key += "V"
-        surface = None
+        surface = toward = None
         if surface_m is not None:
             if emitted is None:
                 raise VrechoError("surface_m: needs emitted, the sound whose echo is looked for at that distance")
             surface = check_surface(surface_m, len(x))
+            check_number(surface_tolerance_m, "surface_tolerance_m", lo=1e-3, hi=0.5)
+            toward = None if mic_toward_surface_m is None else check_mic_toward(mic_toward_surface_m, len(x))
+        elif mic_toward_surface_m is not None:
+            raise VrechoError("mic_toward_surface_m: needs surface_m, the distance it places the echo at")
         model = self.models[key]
         threads = _pool()._max_workers
         parts = min(len(x), threads * -(-len(x) // (threads * CHUNK)))  # a whole number of chunks per thread
@@ -271,7 +293,8 @@ class Classifier:
 
         def answer(part: slice) -> dict[str, np.ndarray]:
             return _answer(model, x[part], raw[part], None if s is None else s if s.ndim == 1 else s[part],
-                           None if images is None else images[part], None if surface is None else surface[part])
+                           None if images is None else images[part], None if surface is None else surface[part],
+                           surface_tolerance_m, None if toward is None else toward[part])
 
         with _few_threads():
             parts = list(_pool().map(answer, chunks)) if len(chunks) > 1 else [answer(chunks[0])]
@@ -304,7 +327,8 @@ frames as two chunks of 32 took EchoCNN-E 0.93 ms a frame, as eight of 8 1.12 ms
 
 
 def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images: np.ndarray | None,
-            surface: np.ndarray | None = None) -> dict[str, np.ndarray]:
+            surface: np.ndarray | None = None, tolerance_m: float = PLANE_TOLERANCE_M,
+            toward: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """A chunk of checked frames answered: the model's probabilities and what the flags need;
     with ``surface`` (and ``s``), open/closed and a closed surface's depth by the echo there."""
     batch, out = {}, {"clipped": clipped(raw)}
@@ -324,7 +348,7 @@ def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images:
                depth_bin=torch.softmax(y["depth_bin"], 1).numpy(), depth_m=y["depth_m"].numpy(),
                src_m=y["src_m"].numpy())
     if surface is not None:
-        echo = plane_echo(x, s, surface, FS)
+        echo = plane_echo(x, s, surface, FS, tolerance_m=tolerance_m, mic_toward_m=toward)
         out["open"] = expit(-(echo.features @ np.array(SURFACE_WEIGHTS) + SURFACE_BIAS))
         out["depth_m"] = np.where(out["open"] < 0.5, echo.depth_m, out["depth_m"])
     return out

@@ -7,7 +7,9 @@ mean and unit variance. At 25 time bins per second one bin spans 40 ms, far coar
 1.5 to 17.5 ms echo delays of surfaces 0.25 to 3 m away; hence the echo features: with the emitted
 sound known, circular Wiener deconvolution of the frame recovers the room's impulse response
 (the frame is the steady state of a pulse train, a circular convolution), from which echo delays
-can be read to a fraction of a sample and band energies to a few milliseconds.
+can be read to a fraction of a sample and band energies to a few milliseconds. With a surface's
+distance known as well (a scan's plane), :func:`plane_echo` reads what the response holds where
+that plane must echo.
 """
 
 from __future__ import annotations
@@ -20,7 +22,6 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 
-from .device import MIC_ABOVE_EMITTER_M
 from .errors import VrechoError
 from .signals import FS, SPEED_OF_SOUND, check_fs, parabolic_peaks
 
@@ -382,73 +383,6 @@ def _band_sums(bin_len: int) -> tuple[np.ndarray, np.ndarray]:
     return np.hanning(bin_len).astype(np.float32), bands.astype(np.float32)
 
 
-def echo_at(audio, emitted, depth_m: float, fs: int = FS, *, window_m: float = 0.03) -> tuple[float, float]:
-    """The echo of a plane expected ``depth_m`` in front of the emitter (say, a wall seen by the
-    camera): its level and its measured depth.
-
-    The impulse response (:func:`echo_response`) is searched within ``window_m`` of that depth
-    (the path emitter, plane, microphone 7 cm above the emitter); the strongest peak there gives
-    the depth (parabolic refinement) and the level in dB relative to the direct sound, corrected
-    for spherical spreading (so 0 dB is a perfect reflector facing a loudspeaker that radiates
-    as strongly forward as toward its microphone). An opening leaves 10 dB or more less there.
-
-    Parameters
-    ----------
-    audio : array_like, shape (n,), float
-        One 1 s frame starting at the pulse onset, n = round(``fs``) samples.
-    emitted : array_like, shape (k,), float
-        The emitted sound at the same rate.
-    depth_m : float
-        Expected distance from the emitter to the plane, in metres.
-    fs : int
-        Sample rate of both, in Hz (resampled to 44.1 kHz).
-    window_m : float
-        Half-width of the depth range searched, in metres; 3 cm by default. The range starts
-        no nearer than 5 cm.
-
-    Returns
-    -------
-    level_db : float
-        Level of the echo in dB relative to the direct sound, corrected for spreading.
-    depth_m : float
-        Measured distance from the emitter to the plane, in metres.
-
-    Raises
-    ------
-    VrechoError
-        If the searched range lies outside the first 30 ms of the response, or for input
-        :func:`echo_response` refuses.
-
-    Examples
-    --------
-    A frame holding the probe and one echo 300 samples later (a plane 1.166 m away):
-
-    >>> from vrecho.signals import probe
-    >>> s = probe()
-    >>> x = np.zeros(44_100, np.float32)
-    >>> x[:4410] += s
-    >>> x[300:4710] += 0.5 * s
-    >>> level_db, depth_m = echo_at(x, s, 1.2)
-    >>> round(depth_m, 3)
-    1.166
-    """
-    c = SPEED_OF_SOUND
-    h = np.abs(echo_response(audio, emitted, fs, length_s=0.03)).astype(np.float64)
-    direct = int(np.argmax(h[:int(0.002 * FS)]))
-
-    def index(d):
-        return np.sqrt((2 * d) ** 2 + MIC_ABOVE_EMITTER_M ** 2) / c * FS
-
-    lo = int(np.floor(index(max(depth_m - window_m, 0.05))))
-    hi = min(int(np.ceil(index(depth_m + window_m))) + 1, len(h) - 1)
-    if lo >= hi:
-        raise VrechoError(f"depth_m: {depth_m} m lies outside the 30 ms analysed")
-    p = lo + int(np.argmax(h[lo:hi]))
-    path = c * float(parabolic_peaks(h, (p,))[0]) / FS
-    level = 20 * np.log10(max(h[p], 1e-12) / max(h[direct], 1e-12)) + 20 * np.log10(path / MIC_ABOVE_EMITTER_M)
-    return float(level), float(np.sqrt(max(path ** 2 - MIC_ABOVE_EMITTER_M ** 2, 0.0)) / 2)
-
-
 PLANE_TOLERANCE_M = 0.05
 """How far the given distance to a surface's plane may be off (a scan's or a depth camera's
 plane: a few centimetres)."""
@@ -481,7 +415,8 @@ PLANE_BANDS_HZ = ((300.0, 15000.0), (2000.0, 15000.0))
 kHz and 16), and where the direct sound rings least."""
 
 
-def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = PLANE_TOLERANCE_M) -> PlaneEcho:
+def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = PLANE_TOLERANCE_M,
+               mic_toward_m=None) -> PlaneEcho:
     """What the impulse response holds where a plane ``surface_m`` in front of the device
     must echo.
 
@@ -503,6 +438,11 @@ def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
         Sample rate in Hz (resampled to 44.1 kHz).
     tolerance_m : float
         How far ``surface_m`` may be off (default :data:`PLANE_TOLERANCE_M`).
+    mic_toward_m : float or array_like, shape (B,), optional
+        How far the microphone sits from the loudspeaker toward the plane (along its normal,
+        negative behind), per frame or for all, where the device's geometry and pose are
+        known: the echo's path is then sqrt(4 d^2 - 4 d a + r^2), and the window only
+        ``tolerance_m`` wide on either side of d (not also r on either side of 2 d).
 
     Returns
     -------
@@ -530,6 +470,7 @@ def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
     x = check_frames(audio, fs)
     x = x.reshape(-1, x.shape[-1])
     d = check_surface(surface_m, len(x))
+    toward = None if mic_toward_m is None else check_mic_toward(mic_toward_m, len(x))
     c = SPEED_OF_SOUND
     ring = int(np.ceil(RING_M / c * FS))
     # one length for every frame, the farthest plane's (a frame's envelope must not depend on its batch)
@@ -544,8 +485,13 @@ def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
         for i, e in enumerate(env):
             t0 = int(np.argmax(e[:int(0.002 * FS)]))  # the direct sound: the microphone r from the loudspeaker
             r = c * t0 / FS
-            lo = max(int(np.floor((2 * (d[i] - tolerance_m) - r) / c * FS)), t0 + gap)
-            hi = max(int(np.ceil((2 * (d[i] + tolerance_m) + r) / c * FS)), lo + 1)
+            if toward is None:  # the microphone anywhere r away: the path lies within 2 d -+ r
+                near, far = 2 * (d[i] - tolerance_m) - r, 2 * (d[i] + tolerance_m) + r
+            else:
+                a = float(np.clip(toward[i], -r, r))
+                near, far = (_image_path(max(d[i] + k * tolerance_m, a / 2), a, r) for k in (-1, 1))
+            lo = max(int(np.floor(near / c * FS)), t0 + gap)
+            hi = max(int(np.ceil(far / c * FS)), lo + 1)
             p = lo + int(np.argmax(e[lo:hi + 1]))
             around = np.concatenate([e[max(lo - gap - ring, t0 + gap):max(lo - gap, t0 + gap)], e[hi + gap:hi + gap + ring]])
             path = c * float(parabolic_peaks(e, (p,))[0]) / FS
@@ -553,8 +499,36 @@ def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
                 [e[p] / max(float(np.median(around)), 1e-300), e[p] / max(float(around.max()), 1e-300),
                  e[p] / max(float(e[t0]), 1e-300) * path / max(r, 0.01)], 1e-300))
             if b == 0:
-                depth[i] = np.sqrt(max(path ** 2 - r ** 2, 0.0)) / 2
+                a = 0.0 if toward is None else float(np.clip(toward[i], -r, r))
+                depth[i] = (a + np.sqrt(max(a ** 2 - r ** 2 + path ** 2, 0.0))) / 2  # _image_path solved for d
     return PlaneEcho(features, depth)
+
+
+def _image_path(d: float, a: float, r: float) -> float:
+    """The echo's path off a plane ``d`` from the loudspeaker, the microphone ``r`` from it and ``a``
+    toward the plane: loudspeaker to its mirror image, to the microphone."""
+    return float(np.sqrt(max(4 * d * d - 4 * d * a + r * r, 0.0)))
+
+
+def check_mic_toward(mic_toward_m, n: int) -> np.ndarray:
+    """The microphone's offsets toward a surface's plane (metres, one for every frame or one
+    per frame of ``n``) checked: finite, within 0.5 m; as an array (n,), float64, or one
+    :class:`~vrecho.errors.VrechoError` naming what is wrong (as :func:`check_surface`)."""
+    a = _per_frame(mic_toward_m, n, "mic_toward_surface_m", "offset")
+    if not np.all(np.isfinite(a)) or np.any(np.abs(a) > 0.5):
+        raise VrechoError(f"mic_toward_surface_m: expected finite offsets within 0.5 m, got {a.tolist()}")
+    return a
+
+
+def _per_frame(value, n: int, name: str, noun: str) -> np.ndarray:
+    """``value``, metres, one for every frame or one per frame of ``n``, as an array (n,)."""
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise VrechoError(f"{name}: expected metres (a number, or one per frame), got {type(value).__name__}") from None
+    if a.ndim > 1 or (a.ndim == 1 and len(a) != n):
+        raise VrechoError(f"{name}: expected one {noun}, or one per frame ({n}), got shape {a.shape}")
+    return np.broadcast_to(a, (n,)).copy()
 
 
 PLANE_TAPER_HZ = 1000.0
@@ -594,14 +568,9 @@ def check_surface(surface_m, n: int) -> np.ndarray:
     VrechoError
         Naming what is wrong.
     """
-    try:
-        d = np.asarray(surface_m, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise VrechoError(f"surface_m: expected metres (a number, or one per frame), got {type(surface_m).__name__}") from None
-    if d.ndim > 1 or (d.ndim == 1 and len(d) != n):
-        raise VrechoError(f"surface_m: expected one distance, or one per frame ({n}), got shape {d.shape}")
+    d = _per_frame(surface_m, n, "surface_m", "distance")
     if not np.all(np.isfinite(d)) or np.any(d <= 0) or np.any(d > MAX_SURFACE_M):
         raise VrechoError(f"surface_m: expected finite distances above 0 and at most {MAX_SURFACE_M:g} m, "
                           f"got {d.tolist()}")
-    return np.broadcast_to(d, (n,)).copy()
+    return d
 

@@ -1,9 +1,9 @@
 """What each hole is: open, or closed glass or mirror, and at what depth.
 
 :func:`infer` asks EchoCNN about the frames that look at a hole (:func:`~.discontinuities.facing`)
-and, by default, adds what the scan knows by physics (the echo's expected delay and its level
-there, the mirror test by reflection, :func:`mirror_evidence`). The ways to decide are a registry,
-:data:`LABELS`, as pyroomacoustics' ``doa.algorithms`` is: a name maps to a class whose instances
+and, by default, adds what the scan knows by physics (the distance to the hole's plane, where
+EchoCNN listens for its echo; the mirror test by reflection, :func:`mirror_evidence`). The ways
+to decide are a registry, :data:`LABELS`, as pyroomacoustics' ``doa.algorithms`` is: a name maps to a class whose instances
 are called with the holes, the frames and what the device heard. A decider of one's own (the
 simulator's oracle, :class:`vrecho.sim.scoring.Oracle`) has the same call; its ``hears``
 attribute says whether it needs the recordings.
@@ -17,7 +17,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..camera import View, crop_view, device_pose
-from ..features import echo_at
+from ..features import MAX_SURFACE_M
 from .discontinuities import Hole, Plane, facing, seen_through
 from .scan import Echoes
 
@@ -59,31 +59,17 @@ class Decision:
     evidence: dict = field(default_factory=dict)
 
 
-ECHO_CLOSED_DB = -2.5
-"""Level (dB, :func:`~vrecho.features.echo_at`) at the scanned plane's delay above which the
-echo says closed. Set on the living room and rooms of seeds 1000 and 3000 (not the benchmark's):
-the frames' :data:`ECHO_QUANTILE` level reads -0.4 to 4.5 dB on 25 closed surfaces, -5.4 to -30
-dB on 14 openings."""
-
-
-ECHO_QUANTILE = 0.2
-"""Which of the frames' levels speaks for a hole: a low one. Another surface's echo arriving
-with the hole's (the floor's, the wall behind the device) only adds sound, so an opening's
-silence shows in the frames it does not mask, while a closed surface echoes in every frame."""
-
-
-ECHO_SLOPE_DB = 1.0
-"""Width of the logistic around :data:`ECHO_CLOSED_DB`: 2.5 dB off it is 92 % one way."""
+SCAN_TOLERANCE_M = 0.03
+"""How far a scanned wall's plane may lie from the truth, where the echo of a closed surface in
+its hole is looked for: the plane is fitted over thousands of a wall's points, 3 cm voxels (its
+depth off by 0.3 cm in the median on the benchmark's rooms). The default 5 cm of
+:meth:`~vrecho.classifier.Classifier.predict` took, on a tuning room (seed 1000, room 0), the
+corner of an opening's wall with the floor, 2 to 9 cm beyond the plane, for glass."""
 
 
 MIRROR_SHARE = 0.15
 """Share of seen-through geometry that, reflected, lands on the room: above it, a mirror (the
 living room: mirror 0.27, window 0.006, opening 0.04)."""
-
-
-def _logit(p: float) -> float:
-    p = float(np.clip(p, 1e-4, 1 - 1e-4))
-    return float(np.log(p / (1 - p)))
 
 
 def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=None, mesh=None, walls=(),
@@ -96,13 +82,13 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
     recording count, and a hole no such frame faces is ``"unknown"``.
 
     With ``use_scan`` (vrecho's choice) the scan adds what it knows, by physics: the wall around
-    the hole is scanned, so the delay of a closed surface's echo is known; the level there
-    (:func:`~vrecho.features.echo_at`, a low quantile, :data:`ECHO_QUANTILE`, over the frames
-    whose specular point, the foot of the emitter's perpendicular, falls in the hole; a logistic
-    around :data:`ECHO_CLOSED_DB`)
-    joins EchoCNN's open/closed log-odds, and the depth comes from the
-    EchoCNN echo when it agrees with the scan within 10 cm, else from the echo nearest the
-    scan's delay. The geometry seen through the hole, reflected in its plane
+    the hole is scanned, so the distance to a closed surface's plane is known. A frame whose
+    specular point, the foot of the loudspeaker's perpendicular to that plane, falls in the hole
+    is asked with it (``surface_m``: open/closed by the echo there or none,
+    :func:`~vrecho.features.plane_echo`); those frames' answers, fused
+    (:func:`~vrecho.classifier.fuse_open`), decide open or closed, and EchoCNN's alone where no
+    frame's foot falls in the hole. A frame's depth is its echo's where it agrees with the scan
+    within 10 cm, else the scan's. The geometry seen through the hole, reflected in its plane
     (:func:`mirror_evidence`), says mirror or not where it is clear (200 or more vertices seen
     through), and glass where almost nothing is seen through (fewer than 50: a mirror always
     shows its phantom); EchoCNN's material answers otherwise. Without ``use_scan``: EchoCNN
@@ -136,9 +122,9 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
         One per hole, in order. Each frame's row in :attr:`Decision.frames` holds ``frame``,
         ``model``, ``p_closed``, ``p_mirror``, ``echo_depth_m`` (EchoCNN's), ``scan_depth_m``
         (emitter to the wall's plane), ``depth_m`` (the one used) and ``offset_m`` (metres);
-        with ``use_scan`` also ``echo_level_db``, ``echo_at_scan_m`` and ``foot_in_hole``.
-        :attr:`Decision.evidence` holds ``echo_level_db``, ``echo_frames`` and
-        ``echo_levels_db`` (where a specular point fell in the hole) and ``mirrored_share`` and
+        with ``use_scan`` also ``foot_in_hole``. :attr:`Decision.evidence` holds
+        ``echo_frames`` and ``p_echo_closed`` (the frames asked with the plane's distance, and
+        their fused answer; where a specular point fell in the hole) and ``mirrored_share`` and
         ``seen_through_vertices`` (with a mesh); empty without ``use_scan``.
 
     Raises
@@ -146,9 +132,9 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
     VrechoError
         From EchoCNN, for a recording it cannot take (a silent frame, or one not 1 s long).
     """
-    if classifier is None:
-        from ..classifier import load_classifier  # torch-bound (1.7 s): only when EchoCNN is asked
+    from ..classifier import fuse_open, load_classifier  # torch-bound (1.7 s): only when EchoCNN is asked
 
+    if classifier is None:
         classifier = load_classifier()
     cameras = np.array([v.pose[:3, 3] for v in views])
     out = []
@@ -159,23 +145,27 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
         if not frames:
             out.append(Decision("unknown", None, None, 0.5, 0.5, 0.0, "echocnn"))
             continue
-        rows = []
+        rows, heard = [], []
         for i in frames:
             image, inside = crop_view(views[i], hole.corners())
             audio = echoes.of(i)
-            pred = classifier.predict(audio, echoes.fs, image=image if inside >= min_crop_inside else None,
-                                      emitted=echoes.emitted)
             pose = device_pose(views[i])
             scan_depth = float(n @ pose.emitter + hole.plane.offset)
+            # The specular echo comes from the foot of the perpendicular: only where it falls in
+            # the hole does the echo at the wall's delay speak of the hole (else of the wall beside it).
+            foot = pose.emitter - scan_depth * n
+            foot_in_hole = bool(hole.contains(foot[None], margin_m=-0.05)[0])
+            surface = scan_depth if use_scan and foot_in_hole and 0 < scan_depth <= MAX_SURFACE_M else None
+            pred = classifier.predict(audio, echoes.fs, image=image if inside >= min_crop_inside else None,
+                                      emitted=echoes.emitted, surface_m=surface, surface_tolerance_m=SCAN_TOLERANCE_M,
+                                      mic_toward_surface_m=None if surface is None else float(n @ (pose.emitter - pose.microphone)))
             row = {"frame": i, "model": pred.model, "p_closed": pred.probabilities["closed"],
                    "p_mirror": pred.probabilities["mirror"], "echo_depth_m": pred.depth_m, "scan_depth_m": scan_depth}
             if use_scan:
-                row["echo_level_db"], row["echo_at_scan_m"] = echo_at(audio, echoes.emitted, scan_depth, echoes.fs)
-                row["depth_m"] = pred.depth_m if abs(pred.depth_m - scan_depth) < 0.1 else row["echo_at_scan_m"]
-                # The specular echo comes from the foot of the perpendicular: only where it falls in
-                # the hole does the echo speak of the hole (else of the wall beside it).
-                foot = pose.emitter - scan_depth * n
-                row["foot_in_hole"] = bool(hole.contains(foot[None], margin_m=-0.05)[0])
+                row["foot_in_hole"] = foot_in_hole
+                row["depth_m"] = pred.depth_m if abs(pred.depth_m - scan_depth) < 0.1 else scan_depth
+                if surface is not None:
+                    heard.append(pred)
             else:
                 row["depth_m"] = pred.depth_m
             row["offset_m"] = row["depth_m"] - float(n @ pose.emitter)
@@ -184,12 +174,9 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
         p_mirror = float(np.mean([r["p_mirror"] for r in rows]))
         evidence = {}
         if use_scan:
-            levels = [r["echo_level_db"] for r in rows if r["foot_in_hole"]]
-            if levels:
-                level = float(np.quantile(levels, ECHO_QUANTILE))
-                p_echo = 1 / (1 + np.exp(-(level - ECHO_CLOSED_DB) / ECHO_SLOPE_DB))
-                p_closed = float(1 / (1 + np.exp(-(_logit(p_closed) + _logit(p_echo)))))
-                evidence.update(echo_level_db=level, echo_frames=len(levels), echo_levels_db=levels)
+            if heard:
+                p_closed = 1.0 - fuse_open(heard)
+                evidence.update(echo_frames=len(heard), p_echo_closed=p_closed)
             if mesh is not None:
                 share, count = mirror_evidence(mesh, hole, walls, cameras)
                 evidence.update(mirrored_share=share, seen_through_vertices=count)

@@ -106,6 +106,10 @@ class EchoFrame:
     condition : str
         Of :data:`CONDITIONS`.
     device : Device
+    mic_toward_m : float
+        How far the microphone sits from the loudspeaker toward the discontinuity's plane
+        (along its normal): what a scan that knows the device's pose and geometry passes as
+        ``mic_toward_surface_m``.
     """
 
     audio: np.ndarray
@@ -118,6 +122,7 @@ class EchoFrame:
     paths_m: tuple
     condition: str
     device: Device
+    mic_toward_m: float = 0.0
 
 
 def random_device(rng: np.random.Generator, condition: str = "envelope") -> Device:
@@ -311,9 +316,10 @@ def _record(rng, scene, index, device: Device, condition: str, probe, cache, dis
     audio = _limit(audio) if device.limiter else audio
     audio = _aac(audio) if device.aac else audio
     top = scene.room.height_m
+    _, _, normal = scene.room.wall_frame(d.wall)  # out of the room: toward the plane
     return EchoFrame(audio.astype(np.float32), probe, d.kind == "open", d.kind, scene.depth_m(pose),
                      float(pose.emitter[2]), float(top - pose.emitter[2]), clutter_paths(scene, index, pose.emitter, mic),
-                     condition, device)
+                     condition, device, float(np.dot(mic - pose.emitter, normal)))
 
 
 CLUTTER_ORDER = 3
