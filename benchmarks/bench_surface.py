@@ -5,7 +5,7 @@ Frames of :func:`vrecho.sim.devices.echo_frame`: the user's own broadband probe
 (``random_probe``) passed as ``emitted``; ``surface_m`` the true distance plus a normal error of
 2 cm (a scan's plane). Conditions (:data:`vrecho.sim.devices.CONDITIONS`): those of
 :data:`TUNING` were used to tune :data:`vrecho.classifier.SURFACE_WEIGHTS` (``--fit``, seeds
-100 000 +); :data:`HELD_OUT` (AAC, and all at once) never were. Every row here is on seeds
+100 000 +); :data:`HELD_OUT` (AAC, 48 kHz, and all at once) never were. Every row here is on seeds
 200 000 + (rooms and devices never used for tuning).
 
 A second table pools the frames by the surface's distance. A third asks about walks
@@ -36,7 +36,7 @@ from multiprocessing import get_context
 
 import numpy as np
 
-HELD_OUT = ("AAC", "envelope")
+HELD_OUT = ("AAC", "48 kHz", "envelope")
 TUNING = ("reference", "omni", "bottom-firing", "offset", "near floor", "near ceiling", "tilted", "transducer",
           "limiter")
 SURFACE_ERROR_M = 0.02
@@ -83,6 +83,22 @@ def frames(conditions, n: int, base: int, cache, task=_frame):
     jobs = [(c, base + 1000 * k + i, cache) for k, c in enumerate(conditions) for i in range(n)]
     with get_context("spawn").Pool(min(2, os.cpu_count() or 1)) as pool:
         return pool.map(task, jobs, chunksize=4 if task is _frame else 1)
+
+
+def ask(clf, frames, **kw) -> list:
+    """``clf.predict_batch`` of :class:`~vrecho.sim.devices.EchoFrame` s, their probes as
+    ``emitted``, a batch per recording rate; per-frame keywords (arrays) are split alike; the
+    answers in the frames' order. ``emitted=None`` asks without the probe."""
+    out = [None] * len(frames)
+    with_probe = kw.pop("emitted", True) is not None
+    for fs in sorted({f.device.fs for f in frames}):
+        idx = [i for i, f in enumerate(frames) if f.device.fs == fs]
+        part = {k: (np.asarray(v)[idx] if np.ndim(v) else v) for k, v in kw.items()}
+        if with_probe:
+            part["emitted"] = np.stack([frames[i].emitted for i in idx])
+        for i, p in zip(idx, clf.predict_batch(np.stack([frames[i].audio for i in idx]), fs, **part)):
+            out[i] = p
+    return out
 
 
 def ece(p: np.ndarray, y: np.ndarray, bins: int = 10) -> float:
@@ -139,15 +155,14 @@ def main() -> None:
         if c == "all":
             w, wo, p, y, amb, pe, pa, _, wg, pg, ambg = (np.concatenate(pooled[k]) for k in keys)
         else:
-            audio = np.stack([r[0].audio for r in sel])
-            emitted = np.stack([r[0].emitted for r in sel])
+            fr = [r[0] for r in sel]
             given = np.array([r[1] for r in sel])
-            toward = np.array([r[0].mic_toward_m for r in sel])
-            y = np.array([r[0].is_open for r in sel])
-            with_s = clf.predict_batch(audio, 44100, emitted=emitted, surface_m=given)
-            with_g = clf.predict_batch(audio, 44100, emitted=emitted, surface_m=given, mic_toward_surface_m=toward)
-            pe = np.array([q.probabilities["open"] for q in clf.predict_batch(audio, 44100, emitted=emitted)])
-            pa = np.array([q.probabilities["open"] for q in clf.predict_batch(audio, 44100)])
+            toward = np.array([f.mic_toward_m for f in fr])
+            y = np.array([f.is_open for f in fr])
+            with_s = ask(clf, fr, surface_m=given)
+            with_g = ask(clf, fr, surface_m=given, mic_toward_surface_m=toward)
+            pe = np.array([q.probabilities["open"] for q in ask(clf, fr)])
+            pa = np.array([q.probabilities["open"] for q in ask(clf, fr, emitted=None)])
             p = np.array([q.probabilities["open"] for q in with_s])
             pg = np.array([q.probabilities["open"] for q in with_g])
             w, wg = (p > 0.5) == y, (pg > 0.5) == y
@@ -186,9 +201,7 @@ def walks(clf, conditions, n: int, cache) -> None:
     from vrecho.classifier import fuse_open
 
     rows = frames(conditions, n, 300_000, cache, task=_walk)
-    audio = np.stack([f.audio for fs, _ in rows for f in fs])
-    emitted = np.stack([f.emitted for fs, _ in rows for f in fs])
-    preds = clf.predict_batch(audio, 44100, emitted=emitted, surface_m=np.concatenate([g for _, g in rows]))
+    preds = ask(clf, [f for fs, _ in rows for f in fs], surface_m=np.concatenate([g for _, g in rows]))
     preds = [preds[i:i + WALK] for i in range(0, len(preds), WALK)]
     y = np.array([fs[0].is_open for fs, _ in rows])
     cond = np.array([fs[0].condition for fs, _ in rows])

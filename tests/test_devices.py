@@ -13,8 +13,9 @@ def test_each_condition_draws_what_it_names(tmp_path):
     seen = {}
     for k, c in enumerate(CONDITIONS):
         f = echo_frame(np.random.default_rng(k), c, cache=tmp_path)
-        assert f.audio.shape == (44100,) and f.audio.dtype == np.float32 and np.all(np.isfinite(f.audio))
-        assert 0 < np.abs(f.audio).max() < 0.97 and f.emitted.shape == (4410,)  # never clipped
+        rate = f.device.fs
+        assert f.audio.shape == (rate,) and f.audio.dtype == np.float32 and np.all(np.isfinite(f.audio))
+        assert 0 < np.abs(f.audio).max() < 0.97 and f.emitted.shape == (rate // 10,)  # never clipped
         assert 0.25 <= f.depth_m <= 3.0 and f.material in ("open", "glass", "mirror") and f.is_open == (f.material == "open")
         assert f.condition == c and len(f.paths_m) >= 5 and min(f.paths_m) > 0  # floor, ceiling, walls at least
         seen[c] = f
@@ -26,6 +27,7 @@ def test_each_condition_draws_what_it_names(tmp_path):
     assert 0.1 <= np.linalg.norm(seen["offset"].device.mic_m) <= 0.15
     assert seen["near floor"].height_m <= 0.6 and seen["near ceiling"].ceiling_m <= 0.4
     assert seen["transducer"].device.low_cut_hz >= 200 and seen["limiter"].device.limiter and seen["AAC"].device.aac
+    assert seen["48 kHz"].device.fs == 48_000 and seen["reference"].device.fs == 44_100
     with pytest.raises(VrechoError, match="condition"):
         random_device(np.random.default_rng(0), "underwater")
 
@@ -49,6 +51,8 @@ def test_a_walk_keeps_its_room_device_and_probe_and_moves(tmp_path):
     depths = np.array([f.depth_m for f in walk])
     assert np.all(np.abs(np.diff(depths)) <= STEP_M + 1e-9) and np.all((depths >= 0.25) & (depths <= 3.0))
     assert not np.array_equal(walk[1].audio, walk[2].audio)
+    fast = echo_frames(np.random.default_rng(3), "48 kHz", 2, cache=tmp_path)  # the probe resampled once, as sent
+    assert [f.emitted.shape for f in fast] == [(4800,), (4800,)] and np.array_equal(fast[0].emitted, fast[1].emitted)
     with pytest.raises(VrechoError, match="n: expected a whole number"):
         echo_frames(np.random.default_rng(3), "reference", 0)
 

@@ -356,8 +356,9 @@ def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images:
 
 SURFACE_WEIGHTS = (-0.3334, 0.0349, 0.4371, 0.4477, -0.0805, 0.0271)
 """How :class:`~vrecho.features.PlaneEcho`'s features weigh toward closed (a logistic, with
-:data:`SURFACE_BIAS`), tuned by ``python3 benchmarks/bench_surface.py --fit --frames 100`` on 900 frames of every
-condition of the envelope but AAC and all-at-once (seeds 100 000 and up; never the benchmark's)."""
+:data:`SURFACE_BIAS`), tuned by ``python3 benchmarks/bench_surface.py --fit --frames 100`` on 900
+frames of every condition of the envelope but AAC, 48 kHz and all-at-once (seeds 100 000 and up;
+never the benchmark's)."""
 SURFACE_BIAS = -0.8326
 
 

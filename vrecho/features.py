@@ -511,9 +511,26 @@ def _image_path(d: float, a: float, r: float) -> float:
 
 
 def check_mic_toward(mic_toward_m, n: int) -> np.ndarray:
-    """The microphone's offsets toward a surface's plane (metres, one for every frame or one
-    per frame of ``n``) checked: finite, within 0.5 m; as an array (n,), float64, or one
-    :class:`~vrecho.errors.VrechoError` naming what is wrong (as :func:`check_surface`)."""
+    """The microphone's offsets toward a surface's plane checked: finite, within 0.5 m.
+
+    Parameters
+    ----------
+    mic_toward_m : float or array_like, shape (n,)
+        Metres, along the plane's normal (negative: behind the loudspeaker); one for every
+        frame, or one per frame.
+    n : int
+        How many frames they are for.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,), float64
+        One offset per frame.
+
+    Raises
+    ------
+    VrechoError
+        Naming ``mic_toward_surface_m`` and what is wrong with it.
+    """
     a = _per_frame(mic_toward_m, n, "mic_toward_surface_m", "offset")
     if not np.all(np.isfinite(a)) or np.any(np.abs(a) > 0.5):
         raise VrechoError(f"mic_toward_surface_m: expected finite offsets within 0.5 m, got {a.tolist()}")

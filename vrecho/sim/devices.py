@@ -32,7 +32,7 @@ from .acoustics import Simulation, build_room, direct_amplitude, impulse_respons
 from .scenes import face, random_scene
 
 CONDITIONS = ("reference", "omni", "bottom-firing", "offset", "near floor", "near ceiling", "tilted", "transducer",
-              "limiter", "AAC", "envelope")
+              "limiter", "AAC", "48 kHz", "envelope")
 """The conditions :func:`echo_frame` draws: one property at its extreme each, all at once
 (``"envelope"``), or none (``"reference"``: the reference device, upright, at the surface's
 height)."""
@@ -64,6 +64,9 @@ class Device:
         Automatic gain (the recording's peak raised to 2x full scale) into a soft limiter.
     aac : bool
         The recording goes through AAC at 128 kbps and back.
+    fs : int
+        The rate it records at, 44 100 or 48 000 Hz (the room is simulated at 44.1 kHz; a 48 kHz
+        device's frame and probe are resampled to its rate before its gain, limiter and codec).
     """
 
     emitter_p: float = 0.7
@@ -74,6 +77,7 @@ class Device:
     resonance_db: float = 0.0
     limiter: bool = False
     aac: bool = False
+    fs: int = FS
 
 
 @dataclass
@@ -82,10 +86,11 @@ class EchoFrame:
 
     Parameters
     ----------
-    audio : numpy.ndarray, shape (44100,), float32
-        The frame, starting at the pulse's onset.
-    emitted : numpy.ndarray, shape (4410,), float32
-        The probe the user sent (as sent: the transducers' colouring is not in it).
+    audio : numpy.ndarray, shape (device.fs,), float32
+        The frame, starting at the pulse's onset, at the device's rate.
+    emitted : numpy.ndarray, shape (device.fs // 10,), float32
+        The probe the user sent (as sent: the transducers' colouring is not in it), at the
+        device's rate.
     is_open : bool
     material : str
         "open", "glass" or "mirror".
@@ -162,6 +167,8 @@ def random_device(rng: np.random.Generator, condition: str = "envelope") -> Devi
         kw["limiter"] = condition == "limiter" or rng.random() < 0.5
     if every or condition == "AAC":
         kw["aac"] = condition == "AAC" or rng.random() < 0.5
+    if condition == "48 kHz" or (every and rng.random() < 0.5):
+        kw["fs"] = 48_000
     return Device(**kw)
 
 
@@ -267,7 +274,8 @@ def echo_frames(rng: np.random.Generator, condition: str = "envelope", n: int = 
         tilt = rng.uniform(20, 30) * rng.choice([-1, 1]) if condition == "tilted" else rng.uniform(-10, 10)
         half = max(d.width_m / 2 - 0.1, 0)
         dist, u = rng.uniform(0.25, 3.0), rng.uniform(-1, 1) * half
-        frame = _record(rng, scene, index, device, condition, None, cache, dist, u, z - d.center_z_m, rng.uniform(-30, 30), tilt)
+        frame, probe = _record(rng, scene, index, device, condition, None, cache, dist, u, z - d.center_z_m,
+                               rng.uniform(-30, 30), tilt)
         if frame is None:
             continue  # the device would stand outside the room
         frames = [frame]
@@ -277,7 +285,7 @@ def echo_frames(rng: np.random.Generator, condition: str = "envelope", n: int = 
                 along = float(np.clip(u + rng.uniform(-0.1, 0.1), -half, half))
                 height = float(np.clip(z + rng.uniform(-0.05, 0.05), max(lo + 0.1, 0.3), min(hi - 0.1, top - 0.15)))
                 tilt = rng.uniform(20, 30) * rng.choice([-1, 1]) if condition == "tilted" else rng.uniform(-10, 10)
-                frame = _record(rng, scene, index, device, condition, frames[0].emitted, cache, step, along,
+                frame, _ = _record(rng, scene, index, device, condition, probe, cache, step, along,
                                 height - d.center_z_m, rng.uniform(-30, 30), tilt)
                 if frame is not None:
                     frames.append(frame)
@@ -290,19 +298,19 @@ def echo_frames(rng: np.random.Generator, condition: str = "envelope", n: int = 
 
 
 def _record(rng, scene, index, device: Device, condition: str, probe, cache, dist: float, u: float, dz: float,
-            yaw: float, tilt: float) -> EchoFrame | None:
+            yaw: float, tilt: float) -> tuple[EchoFrame | None, np.ndarray | None]:
     """The frame ``device`` records at a pose facing discontinuity ``index`` (:func:`~.scenes.face`'s
-    arguments), its probe drawn where ``probe`` is None; None where the device would stand outside
-    the room."""
+    arguments), and its probe at 44.1 kHz (drawn where ``probe`` is None); (None, None) where the
+    device would stand outside the room."""
     try:
         pose = face(scene, index, dist, offset_u_m=u, offset_z_m=dz, yaw_deg=yaw, pitch_deg=tilt)
     except VrechoError:
-        return None
+        return None, None
     left = np.cross(pose.up, pose.forward)
     axes = np.stack([pose.forward, left, pose.up])  # device axes, one per row
     mic = pose.emitter + np.asarray(device.mic_m) @ axes
     if not scene.room.contains(np.stack([pose.emitter, mic])).all():
-        return None
+        return None, None
     d = scene.discontinuities[index]
     ir = impulse_responses(scene, pose.emitter, mic[None], facing=np.asarray(device.axis) @ axes, cache=cache)[0]
     probe = random_probe(rng) if probe is None else probe
@@ -312,14 +320,15 @@ def _record(rng, scene, index, device: Device, condition: str, probe, cache, dis
     # this device has; one a centimetre from its loudspeaker hears the room no louder.
     audio = record_pulse(ir, sent, direct_amplitude(MIC_ABOVE_EMITTER_M, device.emitter_p), rng,
                          *recording_conditions(rng))
+    audio = _at_rate(audio, device.fs)
     audio = audio * min(1.0, HEADROOM / float(np.abs(audio).max()))  # the input gain a device sets: no clipping
     audio = _limit(audio) if device.limiter else audio
-    audio = _aac(audio) if device.aac else audio
+    audio = _aac(audio, device.fs) if device.aac else audio
     top = scene.room.height_m
     _, _, normal = scene.room.wall_frame(d.wall)  # out of the room: toward the plane
-    return EchoFrame(audio.astype(np.float32), probe, d.kind == "open", d.kind, scene.depth_m(pose),
+    return EchoFrame(audio.astype(np.float32), _at_rate(probe, device.fs), d.kind == "open", d.kind, scene.depth_m(pose),
                      float(pose.emitter[2]), float(top - pose.emitter[2]), clutter_paths(scene, index, pose.emitter, mic),
-                     condition, device, float(np.dot(mic - pose.emitter, normal)))
+                     condition, device, float(np.dot(mic - pose.emitter, normal))), probe
 
 
 CLUTTER_ORDER = 3
@@ -392,18 +401,26 @@ def _limit(x: np.ndarray) -> np.ndarray:
     return np.tanh(2.0 * x / max(float(np.abs(x).max()), 1e-9)).astype(np.float32)
 
 
-def _aac(x: np.ndarray, bit_rate: int = 128_000) -> np.ndarray:
-    """``x`` through AAC at ``bit_rate`` and back (PyAV, in memory), aligned to its input."""
+def _at_rate(x: np.ndarray, fs: int) -> np.ndarray:
+    """``x`` (at :data:`~vrecho.signals.FS`) at ``fs``: as is, or resampled (polyphase), float32."""
+    if fs == FS:
+        return np.asarray(x, np.float32)
+    g = int(np.gcd(fs, FS))
+    return scipy.signal.resample_poly(np.asarray(x, np.float64), fs // g, FS // g).astype(np.float32)
+
+
+def _aac(x: np.ndarray, fs: int = FS, bit_rate: int = 128_000) -> np.ndarray:
+    """``x`` at ``fs`` through AAC at ``bit_rate`` and back (PyAV, in memory), aligned to its input."""
     import av  # heavy (PyAV): only where a device encodes
 
     buf = io.BytesIO()
     with av.open(buf, "w", format="adts") as out:
-        stream = out.add_stream("aac", rate=FS, layout="mono")
+        stream = out.add_stream("aac", rate=fs, layout="mono")
         stream.bit_rate = bit_rate
         pad = np.concatenate([x, np.zeros(4096, np.float32)]).astype(np.float32)
         for i in range(0, len(pad), 1024):
             chunk = av.AudioFrame.from_ndarray(pad[None, i:i + 1024], format="flt", layout="mono")
-            chunk.sample_rate = FS
+            chunk.sample_rate = fs
             for packet in stream.encode(chunk):
                 out.mux(packet)
         for packet in stream.encode(None):
