@@ -12,7 +12,8 @@ A second table pools the frames by the surface's distance. A third asks about wa
 (:func:`vrecho.sim.devices.echo_frames`, seeds 300 000 +, never tuned on): 6 frames of one
 device stepping about in front of one surface, each frame asked with its own distance (the
 scan's plane, off by a normal 2 cm for the walk, and the pose's, 5 mm per frame), the answers
-fused by :func:`vrecho.classifier.fuse_open` over the first 1, 3 and 6 frames.
+fused by :func:`vrecho.classifier.fuse_open` over the first 1, 3 and 6 frames, and all 6 asked
+with the device's geometry known (``mic_toward_surface_m``, as the reconstruction asks).
 
 Per condition: frames, open/closed accuracy with ``surface_m`` (the physics), without it
 (EchoCNN-E, the shipped model, the same frames with the probe known; EchoCNN-A, the paper's
@@ -201,21 +202,27 @@ def walks(clf, conditions, n: int, cache) -> None:
     from vrecho.classifier import fuse_open
 
     rows = frames(conditions, n, 300_000, cache, task=_walk)
-    preds = ask(clf, [f for fs, _ in rows for f in fs], surface_m=np.concatenate([g for _, g in rows]))
-    preds = [preds[i:i + WALK] for i in range(0, len(preds), WALK)]
+    flat = [f for fs, _ in rows for f in fs]
+    given = np.concatenate([g for _, g in rows])
     y = np.array([fs[0].is_open for fs, _ in rows])
     cond = np.array([fs[0].condition for fs, _ in rows])
     ks = (1, 3, WALK)
-    p = {k: np.array([fuse_open(q[:k]) for q in preds]) for k in ks}
+    p = {}
+    for geometry in (False, True):
+        kw = {"mic_toward_surface_m": np.array([f.mic_toward_m for f in flat])} if geometry else {}
+        preds = ask(clf, flat, surface_m=given, **kw)
+        preds = [preds[i:i + WALK] for i in range(0, len(preds), WALK)]
+        p.update({(geometry, k): np.array([fuse_open(q[:k]) for q in preds]) for k in ks})
     print(f"\nwalks: {n} per condition of {WALK} frames in front of one surface (seeds 300000+, never tuned on), "
-          f"the answers fused (fuse_open) over the first 1, 3 and {WALK} frames\n")
-    print("| condition | walks | open | 1 frame | 3 frames | 6 frames | calibration error, 1 / 3 / 6 |")
-    print("|---|---|---|---|---|---|---|")
+          f"the answers fused (fuse_open) over the first 1, 3 and {WALK} frames; then {WALK} frames with the "
+          "device's geometry known (mic_toward_surface_m)\n")
+    print("| condition | walks | open | 1 frame | 3 frames | 6 frames | calibration error, 1 / 3 / 6 | 6 frames, geometry known |")
+    print("|---|---|---|---|---|---|---|---|")
     for c in (*conditions, "all"):
         m = np.ones(len(y), bool) if c == "all" else cond == c
-        acc = " | ".join(f"{np.mean((p[k][m] > 0.5) == y[m]):.1%}" for k in ks)
-        print(f"| {c} | {m.sum()} | {y[m].mean():.0%} | {acc} | {' / '.join(f'{ece(p[k][m], y[m]):.1%}' for k in ks)} |",
-              flush=True)
+        acc = " | ".join(f"{np.mean((p[False, k][m] > 0.5) == y[m]):.1%}" for k in ks)
+        print(f"| {c} | {m.sum()} | {y[m].mean():.0%} | {acc} | {' / '.join(f'{ece(p[False, k][m], y[m]):.1%}' for k in ks)} "
+              f"| {np.mean((p[True, WALK][m] > 0.5) == y[m]):.1%} |", flush=True)
 
 
 if __name__ == "__main__":
