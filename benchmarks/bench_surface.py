@@ -57,16 +57,11 @@ def _frame(args):
 
 def crowded(f, given: float, toward: float | None = None) -> bool:
     """Whether another echo of the room (:attr:`~vrecho.sim.devices.EchoFrame.paths_m`) lies in
-    the window :func:`vrecho.features.plane_echo` looks in at the distance ``given``: path
-    2 (given -+ tolerance) -+ r, r the microphone's distance from the loudspeaker; with the
-    microphone ``toward`` the plane known, sqrt(4 d^2 - 4 d a + r^2) for d = given -+ tolerance."""
-    from vrecho.features import PLANE_TOLERANCE_M
+    the window :func:`vrecho.features.plane_echo` looks in at the distance ``given``
+    (:func:`vrecho.features.plane_window_m`; with the microphone ``toward`` the plane known or not)."""
+    from vrecho.features import plane_window_m
 
-    r = float(np.linalg.norm(f.device.mic_m))
-    if toward is None:
-        lo, hi = 2 * (given - PLANE_TOLERANCE_M) - r, 2 * (given + PLANE_TOLERANCE_M) + r
-    else:
-        lo, hi = (np.sqrt(4 * d * d - 4 * d * toward + r * r) for d in (given - PLANE_TOLERANCE_M, given + PLANE_TOLERANCE_M))
+    lo, hi = plane_window_m(given, float(np.linalg.norm(f.device.mic_m)), mic_toward_m=toward)
     return any(lo <= p <= hi for p in f.paths_m)
 
 

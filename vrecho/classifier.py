@@ -41,7 +41,7 @@ from threadpoolctl import ThreadpoolController
 
 from .errors import VrechoError, check_number
 from .features import (BAND_FS, PLANE_TOLERANCE_M, check_emitted, check_frames, check_mic_toward, check_surface, clipped,
-                       echo_features, logmel, plane_echo)
+                       echo_features, logmel)
 from .models import DEPTH_BINS_M, build
 from .signals import FS, MIN_COHERENCE, PULSE_S, analytic_envelope, analytic_filter, check_fs, coherence
 
@@ -333,7 +333,7 @@ def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images:
     with ``surface`` (and ``s``), open/closed and a closed surface's depth by the echo there."""
     batch, out = {}, {"clipped": clipped(raw)}
     if s is not None:
-        f = echo_features(x, s, FS)
+        f = echo_features(x, s, FS, surface_m=surface, tolerance_m=tolerance_m, mic_toward_m=toward)  # one deconvolution for both
         batch["envelope"], batch["bands"] = torch.as_tensor(f.envelope), torch.as_tensor(f.bands)
         out["no_pulse"] = ~_begins_with(x, s) | ~_decays(x, s.shape[-1])
     else:
@@ -348,7 +348,7 @@ def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images:
                depth_bin=torch.softmax(y["depth_bin"], 1).numpy(), depth_m=y["depth_m"].numpy(),
                src_m=y["src_m"].numpy())
     if surface is not None:
-        echo = plane_echo(x, s, surface, FS, tolerance_m=tolerance_m, mic_toward_m=toward)
+        echo = f.plane
         out["open"] = expit(-(echo.features @ np.array(SURFACE_WEIGHTS) + SURFACE_BIAS))
         out["depth_m"] = np.where(out["open"] < 0.5, echo.depth_m, out["depth_m"])
     return out

@@ -315,6 +315,11 @@ def _cached_inverse_filter(sound: bytes, n: int, regularization: float) -> np.nd
     return _inverse_filter(np.frombuffer(sound, np.float32), n, regularization)
 
 
+PLANE_TOLERANCE_M = 0.05
+"""How far the given distance to a surface's plane may be off (a scan's or a depth camera's
+plane: a few centimetres)."""
+
+
 @dataclass
 class EchoFeatures:
     """Echo features of one or more frames.
@@ -327,13 +332,18 @@ class EchoFeatures:
     bands : numpy.ndarray, shape (..., 7, 20), float32
         Log energy of the estimated response in the octave bands of :data:`DECAY_BANDS_HZ` over
         20 bins of 25 ms (0 to 0.5 s), in dB relative to the strongest cell, floored at -120 dB.
+    plane : PlaneEcho or None
+        The echo where a plane whose distance was given must echo (:func:`plane_echo`, from the
+        same deconvolution); None where none was given.
     """
 
     envelope: np.ndarray
     bands: np.ndarray
+    plane: PlaneEcho | None = None
 
 
-def echo_features(audio, emitted, fs: int = FS) -> EchoFeatures:
+def echo_features(audio, emitted, fs: int = FS, *, surface_m=None, tolerance_m: float = PLANE_TOLERANCE_M,
+                  mic_toward_m=None) -> EchoFeatures:
     """:class:`EchoFeatures` of frames whose emitted sound is known.
 
     Both come from the impulse response of :func:`echo_response` over the whole frame; the
@@ -347,18 +357,25 @@ def echo_features(audio, emitted, fs: int = FS) -> EchoFeatures:
         The emitted sound at the same rate: one for every frame, or one per frame.
     fs : int
         Sample rate of both, in Hz (resampled to 44.1 kHz).
+    surface_m, tolerance_m, mic_toward_m : optional
+        A plane's distance, per frame or for all, and its window, as :func:`plane_echo` takes
+        them: its echo comes with the features, from the same deconvolution.
 
     Returns
     -------
     EchoFeatures
-        ``envelope`` (..., 1323) and ``bands`` (..., 7, 20), float32.
+        ``envelope`` (..., 1323) and ``bands`` (..., 7, 20), float32; ``plane`` (one row per
+        frame) with ``surface_m``.
 
     Raises
     ------
     VrechoError
-        For frames :func:`check_frames` refuses or sounds :func:`check_emitted` refuses.
+        For frames :func:`check_frames` refuses, sounds :func:`check_emitted` refuses, or what
+        :func:`plane_echo` refuses.
     """
-    h = echo_response(audio, emitted, fs, length_s=None)
+    x = check_frames(audio, fs)
+    spectrum = _response_spectrum(x, check_emitted(emitted, fs, None if x.ndim == 1 else len(x)))
+    h = scipy.fft.irfft(spectrum, x.shape[-1]).astype(np.float32)  # echo_response's, whole
     early = h[..., :int(round(ECHO_WINDOW_S * FS))]
     env = np.abs(scipy.signal.hilbert(early, axis=-1))
     peak = env[..., :int(0.002 * FS)].max(axis=-1, keepdims=True)  # direct sound: first 2 ms
@@ -371,7 +388,12 @@ def echo_features(audio, emitted, fs: int = FS) -> EchoFeatures:
     e = np.swapaxes((spec.real ** 2 + spec.imag ** 2) @ bands, -1, -2)  # (..., 7, 20)
     db = 10 * np.log10(np.maximum(e, 1e-20))
     db -= db.max(axis=(-2, -1), keepdims=True)
-    return EchoFeatures(envelope.astype(np.float32), np.maximum(db, -120).astype(np.float32))
+    plane = None
+    if surface_m is not None:
+        rows = spectrum.reshape(-1, spectrum.shape[-1])
+        toward = None if mic_toward_m is None else check_mic_toward(mic_toward_m, len(rows))
+        plane = _plane_echo(rows, check_surface(surface_m, len(rows)), tolerance_m, toward)
+    return EchoFeatures(envelope.astype(np.float32), np.maximum(db, -120).astype(np.float32), plane)
 
 
 @functools.lru_cache(maxsize=2)
@@ -383,9 +405,6 @@ def _band_sums(bin_len: int) -> tuple[np.ndarray, np.ndarray]:
     return np.hanning(bin_len).astype(np.float32), bands.astype(np.float32)
 
 
-PLANE_TOLERANCE_M = 0.05
-"""How far the given distance to a surface's plane may be off (a scan's or a depth camera's
-plane: a few centimetres)."""
 RING_M = 1.0
 """The echoes around a plane's delay that :func:`plane_echo` holds its echo against: this much
 path on either side."""
@@ -471,25 +490,27 @@ def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
     x = x.reshape(-1, x.shape[-1])
     d = check_surface(surface_m, len(x))
     toward = None if mic_toward_m is None else check_mic_toward(mic_toward_m, len(x))
+    return _plane_echo(_response_spectrum(x, check_emitted(emitted, fs, len(x))), d, tolerance_m, toward)
+
+
+def _plane_echo(spectrum: np.ndarray, d: np.ndarray, tolerance_m: float, toward: np.ndarray | None) -> PlaneEcho:
+    """:func:`plane_echo` of the response spectra (B, bins) of checked frames, their checked
+    distances ``d`` (B,) and offsets ``toward`` (B,) or None."""
     c = SPEED_OF_SOUND
     ring = int(np.ceil(RING_M / c * FS))
     # one length for every frame, the farthest plane's (a frame's envelope must not depend on its batch)
     n = min(int(np.ceil((2 * (MAX_SURFACE_M + tolerance_m) + 0.3) / c * FS)) + ring + 8, FS)
-    spectrum = _response_spectrum(x, check_emitted(emitted, fs, len(x)))
     f = np.fft.rfftfreq(FS, 1 / FS)
     gap = int(np.ceil(0.1 / c * FS))  # 10 cm of path kept clear between the window and the ring
-    features, depth = np.empty((len(x), 3 * len(PLANE_BANDS_HZ))), np.empty(len(x))
+    features, depth = np.empty((len(d), 3 * len(PLANE_BANDS_HZ))), np.empty(len(d))
     for b, (lo_hz, hi_hz) in enumerate(PLANE_BANDS_HZ):
         h = scipy.fft.irfft(spectrum * _band(f, lo_hz, hi_hz), FS, axis=-1)[:, :n]
         env = np.abs(scipy.signal.hilbert(h, axis=-1))
         for i, e in enumerate(env):
             t0 = int(np.argmax(e[:int(0.002 * FS)]))  # the direct sound: the microphone r from the loudspeaker
             r = c * t0 / FS
-            if toward is None:  # the microphone anywhere r away: the path lies within 2 d -+ r
-                near, far = 2 * (d[i] - tolerance_m) - r, 2 * (d[i] + tolerance_m) + r
-            else:
-                a = float(np.clip(toward[i], -r, r))
-                near, far = (_image_path(max(d[i] + k * tolerance_m, a / 2), a, r) for k in (-1, 1))
+            a = None if toward is None else float(np.clip(toward[i], -r, r))
+            near, far = plane_window_m(d[i], r, tolerance_m, a)
             lo = max(int(np.floor(near / c * FS)), t0 + gap)
             hi = max(int(np.ceil(far / c * FS)), lo + 1)
             p = lo + int(np.argmax(e[lo:hi + 1]))
@@ -499,9 +520,40 @@ def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
                 [e[p] / max(float(np.median(around)), 1e-300), e[p] / max(float(around.max()), 1e-300),
                  e[p] / max(float(e[t0]), 1e-300) * path / max(r, 0.01)], 1e-300))
             if b == 0:
-                a = 0.0 if toward is None else float(np.clip(toward[i], -r, r))
+                a = 0.0 if a is None else a
                 depth[i] = (a + np.sqrt(max(a ** 2 - r ** 2 + path ** 2, 0.0))) / 2  # _image_path solved for d
     return PlaneEcho(features, depth)
+
+
+def plane_window_m(d: float, r: float, tolerance_m: float = PLANE_TOLERANCE_M, mic_toward_m: float | None = None
+                   ) -> tuple[float, float]:
+    """The nearest and farthest path, loudspeaker to microphone, of the echo of a plane ``d``
+    metres away (within ``tolerance_m``), the microphone ``r`` from the loudspeaker: anywhere
+    within r of 2 d, or, with the microphone ``mic_toward_m`` toward the plane (at most r
+    either way), sqrt(4 d^2 - 4 d a + r^2).
+
+    Parameters
+    ----------
+    d, r, tolerance_m : float
+        Metres.
+    mic_toward_m : float, optional
+        Metres, within -r to r.
+
+    Returns
+    -------
+    near, far : float
+        Metres of path: where :func:`plane_echo` looks for the echo.
+
+    Examples
+    --------
+    >>> [round(v, 3) for v in plane_window_m(1.0, 0.07)]
+    [1.83, 2.17]
+    >>> [round(v, 3) for v in plane_window_m(1.0, 0.07, mic_toward_m=0.0)]
+    [1.901, 2.101]
+    """
+    if mic_toward_m is None:  # the microphone anywhere r away: the path lies within 2 d -+ r
+        return 2 * (d - tolerance_m) - r, 2 * (d + tolerance_m) + r
+    return tuple(_image_path(max(d + k * tolerance_m, mic_toward_m / 2), mic_toward_m, r) for k in (-1, 1))
 
 
 def _image_path(d: float, a: float, r: float) -> float:

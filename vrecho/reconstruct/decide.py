@@ -3,8 +3,8 @@
 :func:`infer` asks EchoCNN about the frames that look at a hole (:func:`~.discontinuities.facing`)
 and, by default, adds what the scan knows by physics (the distance to the hole's plane, where
 EchoCNN listens for its echo; the mirror test by reflection, :func:`mirror_evidence`). The ways
-to decide are a registry, :data:`LABELS`, as pyroomacoustics' ``doa.algorithms`` is: a name maps to a class whose instances
-are called with the holes, the frames and what the device heard. A decider of one's own (the
+to decide are a registry, :data:`LABELS`, as pyroomacoustics' ``doa.algorithms`` is: a name maps
+to a class whose instances are called with the holes, the frames and what the device heard. A decider of one's own (the
 simulator's oracle, :class:`vrecho.sim.scoring.Oracle`) has the same call; its ``hears``
 attribute says whether it needs the recordings.
 """
@@ -156,9 +156,10 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
             foot = pose.emitter - scan_depth * n
             foot_in_hole = bool(hole.contains(foot[None], margin_m=-0.05)[0])
             surface = scan_depth if use_scan and foot_in_hole and 0 < scan_depth <= MAX_SURFACE_M else None
+            toward = None if surface is None else float(n @ (pose.emitter - pose.microphone))  # n points into the room
             pred = classifier.predict(audio, echoes.fs, image=image if inside >= min_crop_inside else None,
                                       emitted=echoes.emitted, surface_m=surface, surface_tolerance_m=SCAN_TOLERANCE_M,
-                                      mic_toward_surface_m=None if surface is None else float(n @ (pose.emitter - pose.microphone)))
+                                      mic_toward_surface_m=toward)
             row = {"frame": i, "model": pred.model, "p_closed": pred.probabilities["closed"],
                    "p_mirror": pred.probabilities["mirror"], "echo_depth_m": pred.depth_m, "scan_depth_m": scan_depth}
             if use_scan:

@@ -271,7 +271,7 @@ def echo_frames(rng: np.random.Generator, condition: str = "envelope", n: int = 
         discs = list(scene.discontinuities)
         discs[index] = d
         scene = dataclasses.replace(scene, discontinuities=discs)
-        tilt = rng.uniform(20, 30) * rng.choice([-1, 1]) if condition == "tilted" else rng.uniform(-10, 10)
+        tilt = _tilt(rng, condition)
         half = max(d.width_m / 2 - 0.1, 0)
         dist, u = rng.uniform(0.25, 3.0), rng.uniform(-1, 1) * half
         frame, probe = _record(rng, scene, index, device, condition, None, cache, dist, u, z - d.center_z_m,
@@ -284,9 +284,9 @@ def echo_frames(rng: np.random.Generator, condition: str = "envelope", n: int = 
                 step = float(np.clip(dist + rng.uniform(-STEP_M, STEP_M), 0.25, 3.0))
                 along = float(np.clip(u + rng.uniform(-0.1, 0.1), -half, half))
                 height = float(np.clip(z + rng.uniform(-0.05, 0.05), max(lo + 0.1, 0.3), min(hi - 0.1, top - 0.15)))
-                tilt = rng.uniform(20, 30) * rng.choice([-1, 1]) if condition == "tilted" else rng.uniform(-10, 10)
+                tilt = _tilt(rng, condition)
                 frame, _ = _record(rng, scene, index, device, condition, probe, cache, step, along,
-                                height - d.center_z_m, rng.uniform(-30, 30), tilt)
+                                   height - d.center_z_m, rng.uniform(-30, 30), tilt)
                 if frame is not None:
                     frames.append(frame)
                     dist, u, z = step, along, height
@@ -295,6 +295,11 @@ def echo_frames(rng: np.random.Generator, condition: str = "envelope", n: int = 
                 raise VrechoError(f"echo_frames: no pose of the walk fits after {tries} draws")
         return frames
     raise VrechoError(f"echo_frame: no room and pose fit after {tries} draws")
+
+
+def _tilt(rng: np.random.Generator, condition: str) -> float:
+    """A pose's tilt up or down in degrees: 20 to 30 for ``"tilted"``, up to 10 otherwise."""
+    return rng.uniform(20, 30) * rng.choice([-1, 1]) if condition == "tilted" else rng.uniform(-10, 10)
 
 
 def _record(rng, scene, index, device: Device, condition: str, probe, cache, dist: float, u: float, dz: float,
