@@ -287,8 +287,8 @@ class Classifier:
             raise VrechoError("mic_toward_surface_m: needs surface_m, the distance it places the echo at")
         model = self.models[key]
         threads = _pool()._max_workers
-        parts = min(len(x), threads * -(-len(x) // (threads * CHUNK)))  # a whole number of chunks per thread
-        edges = np.linspace(0, len(x), parts + 1).round().astype(int)
+        n_chunks = min(len(x), threads * -(-len(x) // (threads * CHUNK)))  # a whole number per thread
+        edges = np.linspace(0, len(x), n_chunks + 1).round().astype(int)
         chunks = [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]
 
         def answer(part: slice) -> dict[str, np.ndarray]:
