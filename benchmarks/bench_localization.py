@@ -169,6 +169,114 @@ def target_room(args):
             "position_m": np.sort(np.linalg.norm(true[:, None] - loc.positions[None], axis=-1).min(axis=1)).tolist()}
 
 
+ENVELOPE_TUNING = ("reference", "flat 9x5", "any array", "two mics", "few poses", "head turning", "four sources",
+                   "levels apart", "music", "hum")
+"""The envelope's conditions that may be tuned on (seeds ``--envelope-seed - 500`` and on); the
+others never are: their pooled row is the held-out figure."""
+
+
+def si_sdr(ref: np.ndarray, est: np.ndarray) -> float:
+    """Scale-invariant SDR of ``est`` against ``ref`` (1-D), in dB (Le Roux et al. 2019)."""
+    a = float(np.dot(est, ref) / max(np.dot(ref, ref), 1e-30))
+    e = est - a * ref
+    return float(10 * np.log10(max(a * a * np.dot(ref, ref), 1e-30) / max(np.dot(e, e), 1e-30)))
+
+
+def envelope_room(args):
+    """One walk of the envelope (:func:`vrecho.sim.arrays.envelope_walk`): positions with the count
+    given (3-D and horizontal errors, the reported uncertainty), the count estimated, and the SI-SDR
+    gain over microphone 0 of each source's informed separation (located and true positions) on
+    the walk's middle capture."""
+    condition, seed = args
+    import torch
+
+    torch.set_num_threads(1)
+    from scipy.optimize import linear_sum_assignment
+
+    from localization import locate
+    from localization.separate import informed
+    from vrecho.sim.arrays import envelope_walk
+
+    t0 = time.perf_counter()
+    walk = envelope_walk(np.random.default_rng(seed), condition, cache=os.environ.get("VRECHO_CACHE"))
+    sim = walk.sim
+    true = np.array([s.position for s in sim.sources])
+    n = len(true)
+    row = {"condition": condition, "seed": seed, "sounds": [s.name for s in sim.sources], "n_mics": walk.array.n_mics,
+           "poses": len(sim.captures), "fs": sim.captures[0].fs}
+    t = time.perf_counter()
+    loc = locate(sim.captures, n, bounds=walk.bounds)
+    row["locate_s"] = time.perf_counter() - t
+    err = np.full(n, np.inf)
+    err_h = np.full(n, np.inf)
+    unc = np.full(n, np.nan)
+    strength = np.full(n, np.nan)
+    located = np.full((n, 3), np.nan)
+    if len(loc.positions):
+        D = np.linalg.norm(true[:, None] - loc.positions[None], axis=-1)
+        r, c = linear_sum_assignment(D)
+        err[r] = D[r, c]
+        err_h[r] = np.linalg.norm(true[r, :2] - loc.positions[c, :2], axis=1)
+        unc[r] = loc.uncertainty_m[c]
+        strength[r] = loc.strength[c]
+        located[r] = loc.positions[c]
+    row.update(position_m=err.tolist(), horizontal_m=err_h.tolist(), uncertainty_m=unc.tolist(), strength=strength.tolist(),
+               agreement=loc.agreement)
+    row["count_found"] = len(locate(sim.captures, None, bounds=walk.bounds).positions)
+    k = len(sim.captures) // 2
+    cap, ref = sim.captures[k], sim.images[k, :, 0]
+    base = [si_sdr(ref[j], cap.audio[0]) for j in range(n)]
+    for name, pos in (("located", located), ("true", true)):
+        gains, kept, distinct, share = ([float("nan")] * n for _ in range(4))
+        have = np.all(np.isfinite(pos), axis=1)
+        if have.any():
+            sep = informed(cap, pos[have], guard=False)  # every track; the guard's verdict beside it
+            guarded = informed(cap, pos[have]).separated
+            for i, j in enumerate(np.flatnonzero(have)):
+                gains[j] = si_sdr(ref[j], sep.signals[i]) - base[j]
+                kept[j], distinct[j], share[j] = bool(guarded[i]), float(sep.distinct[i]), float(sep.share[i])
+        row[f"gain_{name}_db"], row[f"kept_{name}"], row[f"distinct_{name}"], row[f"share_{name}"] = gains, kept, distinct, share
+    row["time_s"] = time.perf_counter() - t0
+    return row
+
+
+def report_envelope(rows: list[dict]) -> str:
+    """One row per condition of the envelope, then the pooled tuning and held-out figures."""
+    def cells(sel):
+        pos = np.array([e for r in sel for e in r["position_m"]])
+        hor = np.array([e for r in sel for e in r["horizontal_m"]])
+        unc = np.array([u for r in sel for u in r["uncertainty_m"]], float)
+        ok = np.isfinite(unc) & np.isfinite(pos)
+
+        def gains(name):  # every track, and as the guard leaves them (microphone 0: 0 dB); no source found: 0 dB
+            g = np.array([x for r in sel for x in r[f"gain_{name}_db"]], float)
+            kept = np.array([k is True for r in sel for k in r[f"kept_{name}"]])
+            g = np.where(np.isfinite(g), g, 0.0)
+            return g, np.where(kept, g, 0.0), kept
+        raw, guarded, kept = gains("located")
+        _, true_guarded, _ = gains("true")
+        return (f"{len(sel)} / {len(pos)} | {np.median(pos):.2f} | {np.median(hor):.2f} | {np.mean(pos < 0.5):.0%} | "
+                f"{np.mean(pos[ok] <= 2 * unc[ok]):.0%} | {np.mean([r['count_found'] == len(r['sounds']) for r in sel]):.0%} | "
+                f"{np.median(guarded):+.1f} / {np.mean(guarded >= 0):.0%} | {np.mean(kept):.0%} | "
+                f"{np.median(raw):+.1f} / {np.mean(raw >= 0):.0%} | {np.median(true_guarded):+.1f} / {np.mean(true_guarded >= 0):.0%} | "
+                f"{np.mean([r['locate_s'] / r['poses'] for r in sel]):.1f} s")
+    lines = ["| condition | walks / sources | 3-D median m | horizontal median m | within 0.5 m | error within 2 x uncertainty | "
+             "count right | SI-SDR gain median / >= 0 dB | tracks kept by the guard | unguarded: median / >= 0 dB | "
+             "true positions (guarded): median / >= 0 dB | locate per capture |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    by = {}
+    for r in rows:
+        by.setdefault(r["condition"], []).append(r)
+    for c, sel in by.items():
+        lines.append(f"| {c}{'' if c in ENVELOPE_TUNING else ' (held out)'} | " + cells(sel) + " |")
+    tune = [r for r in rows if r["condition"] in ENVELOPE_TUNING]
+    held = [r for r in rows if r["condition"] not in ENVELOPE_TUNING]
+    for name, sel in (("pooled: tuning conditions", tune), ("pooled: held-out conditions", held)):
+        if sel:
+            lines.append(f"| **{name}** | " + cells(sel) + " |")
+    return "\n".join(lines)
+
+
 def _pct(v, q):
     return float(np.percentile(v, q)) if len(v) else float("nan")
 
@@ -237,6 +345,10 @@ def main():
     ap.add_argument("--rooms", type=int, default=50)
     ap.add_argument("--seed", type=int, default=7000)
     ap.add_argument("--target-rooms", type=int, default=20, help="extra rooms at the issue's separation condition")
+    ap.add_argument("--envelope", type=int, default=0, help="walks per condition of the operating envelope (0: none)")
+    ap.add_argument("--envelope-seed", type=int, default=9500, help="the envelope's walks: seeds from here, per condition")
+    ap.add_argument("--only-envelope", action="store_true", help="the envelope's section alone")
+    ap.add_argument("--conditions", nargs="*", default=None, help="the envelope's conditions to run (default: all)")
     ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1))
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "localization.json")
     a = ap.parse_args()
@@ -244,17 +356,28 @@ def main():
 
     from tqdm import tqdm
 
+    from vrecho.sim.arrays import CONDITIONS
+
     t0 = time.time()
-    work = [(i, a.seed, a.rooms) for i in range(a.rooms)]
+    rows, target, envelope = [], [], []
+    conditions = a.conditions or CONDITIONS
     with get_context("spawn").Pool(a.jobs) as pool:
-        rows = list(tqdm(pool.imap(one_room, work), total=a.rooms, desc="rooms"))
-        target = list(tqdm(pool.imap(target_room, [(i, a.seed) for i in range(a.target_rooms)]), total=a.target_rooms,
-                           desc="target rooms"))
-    text = report(rows) + ("\n\n" + report_target(target, a.seed) if target else "")
+        if not a.only_envelope:
+            rows = list(tqdm(pool.imap(one_room, [(i, a.seed, a.rooms) for i in range(a.rooms)]), total=a.rooms, desc="rooms"))
+            target = list(tqdm(pool.imap(target_room, [(i, a.seed) for i in range(a.target_rooms)]), total=a.target_rooms,
+                               desc="target rooms"))
+        work = [(c, a.envelope_seed + 1000 * CONDITIONS.index(c) + i) for i in range(a.envelope) for c in conditions]
+        envelope = list(tqdm(pool.imap_unordered(envelope_room, work), total=len(work), desc="envelope walks"))
+    envelope.sort(key=lambda r: (CONDITIONS.index(r["condition"]), r["seed"]))
+    parts = ([report(rows)] if rows else []) + ([report_target(target, a.seed)] if target else [])
+    if envelope:
+        parts.append(f"The operating envelope: {a.envelope} walks per condition (seeds {a.envelope_seed} + 1000 x the "
+                     f"condition's number + i)\n\n" + report_envelope(envelope))
+    text = "\n\n".join(parts)
     print(text)
-    print(f"\n{a.rooms} rooms, seed {a.seed}, {time.time() - t0:.0f} s with {a.jobs} processes")
+    print(f"\n{0 if a.only_envelope else a.rooms} rooms, seed {a.seed}, {time.time() - t0:.0f} s with {a.jobs} processes")
     a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text(json.dumps({"seed": a.seed, "rows": rows, "target_rows": target}, indent=1))
+    a.out.write_text(json.dumps({"seed": a.seed, "rows": rows, "target_rows": target, "envelope_rows": envelope}, indent=1))
 
 
 if __name__ == "__main__":

@@ -562,6 +562,7 @@ def monitor_cases() -> list[Case]:
 def localization_cases() -> list[Case]:
     import localization
     from localization import Capture
+    from vrecho.sim.arrays import envelope_walk
 
     rng = np.random.default_rng(1)
     mics = np.array([[0, 0, 1.5], [0.1, 0, 1.5], [0, 0.1, 1.5], [0, 0, 1.6]])
@@ -623,6 +624,13 @@ def localization_cases() -> list[Case]:
     cases.append(Case("localization", "place_sources: not captures", lambda: localization.place_sources([1, 2], bounds=box)))
     cases.append(Case("localization", "separate: unknown method", lambda: localization.separate(coherent(), 1,
                                                                                                   method="magic")))
+    for name, pos in {"NaN position": [[np.nan, 1, 1], [2, 2, 1]], "2-D positions": [[1, 1], [2, 2]],
+                      "no positions": np.zeros((0, 3)), "9 positions": np.arange(27.0).reshape(9, 3),
+                      "text": "the sofa", "None": None}.items():
+        cases.append(Case("localization", f"informed: {name}", lambda pos=pos: localization.informed(coherent(), pos)))
+    cases.append(Case("localization", "informed: not a capture", lambda: localization.informed(np.zeros((4, 16000)), [[1, 1, 1]])))
+    cases.append(Case("localization", "envelope_walk: unknown condition",
+                      lambda: envelope_walk(rng, "underwater")))
     return cases
 
 

@@ -7,7 +7,8 @@
 - :func:`separate` (separate.py): pyroomacoustics' AuxIVA, ILRMA, FastMNMF2, a single-channel
   NMF, and vrecho's separation informed by the positions: masknet.py's network gives each
   time-frequency bin's share of each located source (weights shipped in ``assets/``), a
-  multichannel Wiener filter the sources' images.
+  multichannel Wiener filter the sources' images; :func:`informed` says which tracks its guard
+  kept (a track that could come out worse than the microphone is the microphone, flagged).
 - :func:`place_sources`: both, giving :class:`PlacedSource` for :mod:`usd_export`.
 """
 
@@ -21,10 +22,10 @@ from vrecho.errors import VrechoError, check_count
 
 from .capture import Capture
 from .locate import MAX_SOURCES, Located, check_captures, doa, locate
-from .separate import SEPARATORS, separate, steering
+from .separate import SEPARATORS, informed, separate, steering
 from .sources import PlacedSource
 
-__all__ = ["Capture", "Located", "PlacedSource", "doa", "locate", "place_sources", "separate"]
+__all__ = ["Capture", "Located", "PlacedSource", "doa", "informed", "locate", "place_sources", "separate"]
 
 CROSSFADE_S = 0.05
 AGREEMENT_SURE = 1.3
@@ -68,8 +69,10 @@ def place_sources(captures, n_sources: int | None = None, *, bounds=None, method
         of :func:`locate`: 0 at an agreement of 1 or less, as diffuse noise and crosstalk get,
         1 from :data:`AGREEMENT_SURE`; one half for a single capture, which cannot tell), in
         [0, 1];
-        ``uncertainty_m``: the position's standard error in metres (None where unknown). Empty
-        where no coherent source is heard (independent noise on each microphone).
+        ``uncertainty_m``: the position's standard error in metres (None where unknown);
+        ``flags``: ``"not separated in N of M captures"`` where informed separation's guard gave
+        microphone 0 instead of a track that could have come out worse. Empty where no coherent
+        source is heard (independent noise on each microphone).
 
     Raises
     ------
@@ -91,16 +94,22 @@ def place_sources(captures, n_sources: int | None = None, *, bounds=None, method
     fs = captures[0].fs
     fade = int(CROSSFADE_S * fs)
     tracks = [np.zeros(0) for _ in range(k)]
+    kept = np.zeros(k, int)
     for c in tqdm(captures, desc="separating", unit="capture", disable=not progress):
-        y = separate(c, k, method=method, positions=located.positions)
-        if method != "informed":  # blind outputs come in any order: match them to the positions
+        if method == "informed":
+            sep = informed(c, located.positions)
+            y, kept = sep.signals, kept + sep.separated
+        else:  # blind outputs come in any order: match them to the positions
+            y = separate(c, k, method=method)
             y = y[_order_by_direction(c, y, located.positions)]
+            kept += 1
         for i in range(k):
             tracks[i] = _join(tracks[i], y[i], fade)
     sure = 0.5 if len(captures) == 1 else float(np.clip((located.agreement - 1) / (AGREEMENT_SURE - 1), 0, 1))
     return [PlacedSource(located.positions[i], tracks[i].astype(np.float32), fs,
                          float(np.clip(located.strength[i], 0, 1)) * sure,
-                         f"source_{i}", None if not np.isfinite(located.uncertainty_m[i]) else float(located.uncertainty_m[i]))
+                         f"source_{i}", None if not np.isfinite(located.uncertainty_m[i]) else float(located.uncertainty_m[i]),
+                         () if kept[i] == len(captures) else (f"not separated in {len(captures) - kept[i]} of {len(captures)} captures",))
             for i in range(k)]
 
 

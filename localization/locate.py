@@ -91,8 +91,13 @@ class Located:
     positions : numpy.ndarray [shape=(K, 3)]
         World positions in metres.
     uncertainty_m : numpy.ndarray [shape=(K,)]
-        The standard error of each position in metres (``inf`` where it is unknown: fewer than
-        three captures, or all of them in line with the source).
+        Each position's uncertainty in metres: the norm of ``uncertainty_axes_m`` (``inf`` where
+        it is unknown: fewer than three captures, or all of them in line with the source).
+    uncertainty_axes_m : numpy.ndarray [shape=(K, 3)]
+        The same along the world's x, y and z: the triangulation's standard error on each axis,
+        widened to half the extent of every other place the map rates nearly as high
+        (:data:`AMBIGUOUS_SHARE` of the peak): a flat array at one height hears a source above
+        it as one below it, and says so on z until the head's pitch and roll tell them apart.
     strength : numpy.ndarray [shape=(K,)]
         Each source's share of the map's peak power (the first is 1).
     agreement : float
@@ -107,6 +112,7 @@ class Located:
     strength: np.ndarray
     directions: np.ndarray
     agreement: float = float("nan")
+    uncertainty_axes_m: np.ndarray | None = None
 
 
 def check_captures(captures) -> list[Capture]:
@@ -257,7 +263,12 @@ def _sphere(n: int) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], -1)
 
 
-def triangulate(centers: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, float]:
+AMBIGUOUS_SHARE = 0.9
+"""The share of a source's map peak from which another place of the map (nearer to it than to
+any other source found) counts as where it might be (:attr:`Located.uncertainty_axes_m`)."""
+
+
+def triangulate(centers: np.ndarray, directions: np.ndarray, *, axes: bool = False) -> tuple[np.ndarray, float]:
     """Least-squares point nearest rays ``centers + t * directions``, and its standard error.
 
     Parameters
@@ -266,14 +277,17 @@ def triangulate(centers: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray
         The rays' origins in metres.
     directions : numpy.ndarray [shape=(n, 3)]
         The rays' unit directions.
+    axes : bool
+        Give the standard error on each of x, y and z (default False: its norm).
 
     Returns
     -------
     x : numpy.ndarray [shape=(3,)]
         The point in metres.
-    sigma : float
-        Its standard error in metres; ``inf`` (unknown) for fewer than three rays, or for rays
-        all parallel (no crossing: ``x`` is then their common line's point nearest the origin).
+    sigma : float or numpy.ndarray [shape=(3,)]
+        Its standard error in metres (on each axis where ``axes``); ``inf`` (unknown) for fewer
+        than three rays, or for rays all parallel (no crossing: ``x`` is then their common line's
+        point nearest the origin).
 
     Examples
     --------
@@ -289,10 +303,11 @@ def triangulate(centers: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray
     A = P.sum(axis=0)
     x = np.linalg.lstsq(A, np.einsum("nij,nj->i", P, centers), rcond=1e-8)[0]
     if len(centers) < 3 or np.linalg.cond(A) > 1e8:
-        return x, float("inf")
+        return x, np.full(3, np.inf) if axes else float("inf")
     resid = np.einsum("nij,nj->ni", P, x - centers)
     sigma2 = (resid ** 2).sum() / (2 * len(centers) - 3)
-    return x, float(np.sqrt(np.trace(np.linalg.inv(A)) * sigma2))
+    var = np.diag(np.linalg.inv(A)) * sigma2
+    return x, np.sqrt(np.maximum(var, 0)) if axes else float(np.sqrt(np.maximum(var, 0).sum()))
 
 
 def _pose_direction(votes: "Votes", k: int, x: np.ndarray, sphere: np.ndarray, cone_deg: float = 12.0) -> np.ndarray:
@@ -549,15 +564,19 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
     votes.maps = every_vote
     centers = np.array([c.center for c in captures])
     positions = np.array(found).reshape(-1, 3)
-    unc = np.full(len(found), np.inf)
-    if len(captures) >= 3:
+    unc = np.full((len(found), 3), np.inf)
+    if len(captures) >= 3 and len(found):
         sphere = _sphere(40000)
+        whole = _power(votes, grid, ())
+        owner = np.argmin(np.linalg.norm(grid[:, None] - positions[None], axis=-1), axis=1)
         for i, x in enumerate(positions):
             rays = np.array([_pose_direction(votes, k, x, sphere) for k in range(len(captures))])
-            unc[i] = triangulate(centers, rays)[1]
+            near = grid[(owner == i) & (whole >= AMBIGUOUS_SHARE * float(votes.power(x[None])[0]))]
+            spread = np.abs(near - x).max(axis=0) / 2 if len(near) else np.zeros(3)
+            unc[i] = np.hypot(triangulate(centers, rays, axes=True)[1], spread)
     d = positions[None] - centers[:, None]
-    return Located(positions, unc, np.array(strength) / max(strength[:1], default=1.0),
-                   d / np.linalg.norm(d, axis=-1, keepdims=True), agreement)
+    return Located(positions, np.linalg.norm(unc, axis=1), np.array(strength) / max(strength[:1], default=1.0),
+                   d / np.linalg.norm(d, axis=-1, keepdims=True), agreement, unc)
 
 
 def _turned_peak(votes: "Votes", grid: np.ndarray) -> float:

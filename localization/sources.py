@@ -27,6 +27,9 @@ class PlacedSource:
         A label for people and for file names.
     uncertainty_m : float or None
         The position's standard error in metres where one is known.
+    flags : tuple of str
+        What the listener should know about the track (``"not separated in N of M captures"``:
+        microphone 0 there, as separation could have made it worse).
     """
 
     position: np.ndarray
@@ -35,3 +38,4 @@ class PlacedSource:
     confidence: float = 1.0
     name: str = "source"
     uncertainty_m: float | None = None
+    flags: tuple = ()

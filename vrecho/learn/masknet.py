@@ -35,33 +35,51 @@ from localization.separate import analysis, steering
 from ..errors import VrechoError, read_json
 from ..io import ensure_writable_dir
 from ..sim.ambient import random_walk, simulate_walk_capture
+from ..sim.arrays import TRAINING, envelope_walk
 from . import cluster
 
 SEED = 20_000
 """Training rooms' first seed."""
 
 
+WALKS = ("shoebox", "envelope")
+"""The training walks :func:`make_examples` draws: ``"shoebox"`` (the headset's, on
+:func:`~vrecho.sim.ambient.random_walk`'s arcs; the positions jittered by 12 cm) or
+``"envelope"`` (:data:`vrecho.sim.arrays.TRAINING`: any array, the head turning, 2 to 4
+sources 0 to 20 dB apart; a quarter of the positions missed by 0.3 to 1.5 m, as
+:func:`localization.locate` misses them on other arrays, so that the network learns to doubt a
+geometry the audio does not bear out)."""
+
+
 def _examples(args):
     """Training examples from the rooms ``share::jobs`` (one augmentation stream per share),
     saved as ``data_dir/share<share>.npz`` (features, microphone 0's magnitudes, targets)."""
-    share, jobs, n_rooms, seed, data_dir = args
+    share, jobs, n_rooms, seed, data_dir, walks = args
 
     rng_aug = np.random.default_rng(share)
     freqs = np.fft.rfftfreq(NFFT, 1 / FS)
     feats, mags, targets = [], [], []
     for i in range(share, n_rooms, jobs):
         rng = np.random.default_rng(seed + i)
-        n_src = int(rng.integers(2, 4))
-        rt60 = rng.uniform(0.2, 0.8)
-        room, sources, poses = random_walk(rng, n_src, rt60)
-        sim = simulate_walk_capture(room, sources, poses, rng, segment_s=1.5)
-        true = np.array([s.position for s in sources])
+        if walks == "envelope":
+            sim = envelope_walk(rng, TRAINING).sim
+        else:
+            n_src = int(rng.integers(2, 4))
+            room, sources, poses = random_walk(rng, n_src, rng.uniform(0.2, 0.8))
+            sim = simulate_walk_capture(room, sources, poses, rng, segment_s=1.5)
+        true = np.array([s.position for s in sim.sources])
+        n_src = len(true)
         for p, cap in enumerate(sim.captures):
             images = sim.images[p].astype(np.float32).astype(np.float64)
             noise = cap.audio.astype(np.float32) - images.sum(axis=0)
             images = images * 10 ** (rng_aug.uniform(-5, 5, n_src) / 20)[:, None, None]
             mix = images.sum(axis=0) + noise
             positions = true + rng_aug.normal(0, 0.12, true.shape)
+            if walks == "envelope":
+                miss = rng_aug.random(n_src) < 0.25
+                away = rng_aug.normal(size=true.shape)
+                away *= rng_aug.uniform(0.3, 1.5, (n_src, 1)) / np.linalg.norm(away, axis=1, keepdims=True)
+                positions[miss] = true[miss] + away[miss]
             X = analysis(mix, NFFT)
             f = features(X, steering(cap, positions, freqs))  # the steering reads the microphones only
             S = np.stack([analysis(im[:1], NFFT)[..., 0] for im in images])
@@ -77,7 +95,8 @@ def _examples(args):
     return path
 
 
-def make_examples(data_dir: Path, *, rooms: int = 1200, jobs: int = 2, seed: int = SEED, ray: str | None = None) -> list[Path]:
+def make_examples(data_dir: Path, *, rooms: int = 1200, jobs: int = 2, seed: int = SEED, ray: str | None = None,
+                  walks: str = "shoebox") -> list[Path]:
     """Simulate ``rooms`` training walks on ``jobs`` processes into ``data_dir`` (reused when
     its shards were made for the same rooms, processes, seed and FFT size).
 
@@ -95,6 +114,8 @@ def make_examples(data_dir: Path, *, rooms: int = 1200, jobs: int = 2, seed: int
         Make the shards as Ray tasks, one each (:func:`.cluster.run_rooms`): ``"auto"`` (a
         local cluster) or a cluster's address, ``data_dir`` a folder every node sees; the same
         shards as the processes' for the same ``jobs``.
+    walks : str
+        One of :data:`WALKS` (default ``"shoebox"``).
 
     Returns
     -------
@@ -107,19 +128,21 @@ def make_examples(data_dir: Path, *, rooms: int = 1200, jobs: int = 2, seed: int
     VrechoError
         When ``data_dir`` cannot be written.
     """
+    if walks not in WALKS:
+        raise VrechoError(f"walks: expected one of {WALKS}, got {walks!r}")
     data_dir = Path(data_dir)
     ensure_writable_dir(data_dir)
     stamp = data_dir / "made.json"
-    want = {"rooms": rooms, "jobs": jobs, "seed": seed, "nfft": NFFT}
+    want = {"rooms": rooms, "jobs": jobs, "seed": seed, "nfft": NFFT, **({"walks": walks} if walks != "shoebox" else {})}
     if stamp.exists() and _stamp(stamp) == want:
         return [data_dir / f"share{s}.npz" for s in range(jobs)]
     if ray is not None:
-        cluster.run_rooms(ray, _examples, list(range(jobs)), lambda s: ((s, jobs, rooms, seed, data_dir),),
+        cluster.run_rooms(ray, _examples, list(range(jobs)), lambda s: ((s, jobs, rooms, seed, data_dir, walks),),
                           lambda s: None, what="shares of the rooms")
         paths = [data_dir / f"share{s}.npz" for s in range(jobs)]
     else:
         with get_context("spawn").Pool(jobs) as pool:
-            paths = pool.map(_examples, [(s, jobs, rooms, seed, data_dir) for s in range(jobs)])
+            paths = pool.map(_examples, [(s, jobs, rooms, seed, data_dir, walks) for s in range(jobs)])
     stamp.write_text(json.dumps(want))
     return paths
 
@@ -241,7 +264,7 @@ def _fit(model, train_set, val_set, *, epochs: int, lr: float, batch: int, seed:
 def train(out: Path, *, rooms: int = 1200, epochs: int = 16, lr: float = 2e-3, init: Path | None = None,
           jobs: int = 2, seed: int = SEED, width: int = 32, data_dir: Path | None = None,
           progress: bool = True, ray: str | None = None, workers: int = 1, gpus_per_worker: float = 0.0,
-          checkpoints: Path | None = None) -> list[float]:
+          checkpoints: Path | None = None, walks: str = "shoebox") -> list[float]:
     """Train the mask network on simulated walks and save its weights.
 
     Simulate ``rooms`` training walks (into ``data_dir``, a temporary folder if None), train a
@@ -282,6 +305,8 @@ def train(out: Path, *, rooms: int = 1200, epochs: int = 16, lr: float = 2e-3, i
     checkpoints : path, optional
         Ray Train's checkpoints, and a rerun's resume (with ``ray``; a folder every node sees);
         default ``masknet-ray`` in the working folder.
+    walks : str
+        The training walks, one of :data:`WALKS` (default ``"shoebox"``).
 
     Returns
     -------
@@ -302,7 +327,7 @@ def train(out: Path, *, rooms: int = 1200, epochs: int = 16, lr: float = 2e-3, i
         raise VrechoError("masknet: --ray at a cluster's address needs --data, a folder every node sees")
     init_state = torch.load(init, map_location="cpu", weights_only=True) if init is not None else None
     with tempfile.TemporaryDirectory() as tmp:
-        paths = make_examples(Path(data_dir or tmp), rooms=rooms, jobs=jobs, seed=seed, ray=ray)
+        paths = make_examples(Path(data_dir or tmp), rooms=rooms, jobs=jobs, seed=seed, ray=ray, walks=walks)
         if ray is not None:
             batch = 32 if gpus_per_worker else 8
             model, history = cluster.fit_on_ray(
@@ -358,6 +383,7 @@ def main():
     ap.add_argument("--width", type=int, default=32, help="the network's channels")
     ap.add_argument("--data", type=Path, default=None, help="keep the simulated examples here (and reuse them)")
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--walks", choices=WALKS, default="shoebox", help="the training walks (default: shoebox)")
     cluster.add_argument(ap, "simulate the walks as Ray tasks (--jobs shares) and train with Ray Train")
     ap.add_argument("--workers", type=int, default=1, help="Ray Train workers (with --ray)")
     ap.add_argument("--gpus-per-worker", type=float, default=0.0, help="GPUs per Ray Train worker (with --ray)")
@@ -366,7 +392,7 @@ def main():
     a = ap.parse_args()
     t0 = time.time()
     train(a.out, rooms=a.rooms, epochs=a.epochs, lr=a.lr, init=a.init, jobs=a.jobs, seed=a.seed, width=a.width, data_dir=a.data,
-          ray=a.ray, workers=a.workers, gpus_per_worker=a.gpus_per_worker, checkpoints=a.checkpoints)
+          ray=a.ray, workers=a.workers, gpus_per_worker=a.gpus_per_worker, checkpoints=a.checkpoints, walks=a.walks)
     print(f"{a.out} written in {time.time() - t0:.0f} s")
 
 

@@ -26,6 +26,11 @@ KINDS: tuple[str, ...] = ("speech", "music", "hum")
 """Continuous ambient sounds; :data:`vrecho.signals.SOUNDS` names are accepted too."""
 
 
+HIGH_PASS_HZ = 40.0
+"""Every ambient sound is high-passed here (second order): sources and microphones pass little
+below it."""
+
+
 _VOWELS = ((730, 1090, 2440), (270, 2290, 3010), (300, 870, 2240), (530, 1840, 2480), (570, 840, 2410),
            (440, 1020, 2240), (660, 1720, 2410), (490, 1350, 1690))
 """Formant frequencies F1, F2, F3 in Hz of eight English vowels (Peterson and Barney)."""
@@ -78,6 +83,10 @@ def ambient_sound(kind: str, duration_s: float, fs: int, rng: np.random.Generato
         x = _repeated(kind, n, fs, rng)
     else:
         raise VrechoError(f"sound: expected one of {KINDS + SOUNDS}, got {kind!r}")
+    # What a source radiates and a microphone takes in: nothing below some 40 Hz (the voice's
+    # glottal pulses through its formants and the fans' brown noise left a third of their power
+    # below 20 Hz, which no direction or mask can share out)
+    x = scipy.signal.sosfilt(scipy.signal.butter(2, HIGH_PASS_HZ, "highpass", fs=fs, output="sos"), x)
     peak = np.max(np.abs(x))
     return (0.8 * x / peak).astype(np.float32) if peak > 0 else x.astype(np.float32)
 
