@@ -16,9 +16,9 @@ Methods:
   gives its image at microphone 0 (the filter keeps what the steering model misses:
   reverberation), and the share's square root, bin by bin, takes out what a time-invariant
   filter cannot (without it, SI-SDR on the envelope's tuning walks gains 0.4 dB in the median
-  and the interference comes back: 7 dB less SIR gain on the tests' room). Runs at 16 kHz: a capture at another rate is resampled to it and back, and
-  above 8 kHz each source gets microphone 0 weighted by its share of 6 to 8 kHz. It does no
-  harm where it cannot help: a lone source's track is microphone 0 itself, and :func:`informed`'s
+  and the interference comes back: 7 dB less SIR gain on the tests' room). Runs at 16 kHz: a
+  capture at another rate is resampled to it and back, and above 8 kHz each source gets
+  microphone 0 weighted by its share of 6 to 8 kHz. It does no harm where it cannot help: a lone source's track is microphone 0 itself, and :func:`informed`'s
   guard (:data:`GUARD`) gives microphone 0, flagged, for a source that the array cannot tell
   from the others over enough of the spectrum, or that the network gives too little of it.
 
@@ -223,13 +223,14 @@ def _check_positions(positions, n_sources: int | None) -> np.ndarray:
     one :class:`VrechoError`."""
     if positions is None:
         raise VrechoError("informed separation needs the sources' positions (localization.locate)")
-    want = "(K, 3)" if n_sources is None else f"({n_sources}, 3)"
+    want = f"(K, 3) (K from 1 to {MAX_SOURCES})" if n_sources is None else f"({n_sources}, 3)"
     try:
         positions = np.asarray(positions, dtype=float)
     except (TypeError, ValueError):
         raise VrechoError(f"positions: expected {want} numbers, got {positions!r}") from None
-    ok = positions.ndim == 2 and positions.shape[1:] == (3,) and 1 <= len(positions) <= MAX_SOURCES
-    if not ok or (n_sources is not None and len(positions) != n_sources) or not np.all(np.isfinite(positions)) \
+    count = len(positions) if positions.ndim == 2 else -1
+    count_ok = 1 <= count <= MAX_SOURCES if n_sources is None else count == n_sources
+    if not (positions.shape[1:] == (3,) and count_ok) or not np.all(np.isfinite(positions)) \
             or np.max(np.abs(positions)) > MAX_COORD_M:
         raise VrechoError(f"positions: expected {want} finite positions within {MAX_COORD_M:g} m of the "
                           f"origin, got shape {positions.shape}")
