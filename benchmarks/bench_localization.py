@@ -194,7 +194,7 @@ def envelope_room(args):
     from scipy.optimize import linear_sum_assignment
 
     from localization import locate
-    from localization.separate import informed
+    from localization.separate import informed, passes_guard
     from vrecho.sim.arrays import envelope_walk
 
     t0 = time.perf_counter()
@@ -231,7 +231,7 @@ def envelope_room(args):
         have = np.all(np.isfinite(pos), axis=1)
         if have.any():
             sep = informed(cap, pos[have], guard=False)  # every track; the guard's verdict beside it
-            guarded = informed(cap, pos[have]).separated
+            guarded = passes_guard(sep.distinct, sep.share)
             for i, j in enumerate(np.flatnonzero(have)):
                 gains[j] = si_sdr(ref[j], sep.signals[i]) - base[j]
                 kept[j], distinct[j], share[j] = bool(guarded[i]), float(sep.distinct[i]), float(sep.share[i])

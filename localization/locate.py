@@ -550,6 +550,8 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
     limit = n_sources or max_sources
     while len(found) < limit:
         p = _power(votes, grid, found)  # two sources closer than MIN_SEPARATION_M are one to this array
+        if not found:  # the first pass's map is the whole one, which the uncertainty below reads
+            whole = p
         best = int(np.argmax(p))
         # The strongest peak must stand clear of incoherent noise; later ones are judged against it, on
         # maps that explain() has thinned (the floor, made for the whole map, is not theirs)
@@ -567,7 +569,6 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
     unc = np.full((len(found), 3), np.inf)
     if len(captures) >= 3 and len(found):
         sphere = _sphere(40000)
-        whole = _power(votes, grid, ())
         owner = np.argmin(np.linalg.norm(grid[:, None] - positions[None], axis=-1), axis=1)
         for i, x in enumerate(positions):
             rays = np.array([_pose_direction(votes, k, x, sphere) for k in range(len(captures))])

@@ -18,9 +18,10 @@ Methods:
   filter cannot (without it, SI-SDR on the envelope's tuning walks gains 0.4 dB in the median
   and the interference comes back: 7 dB less SIR gain on the tests' room). Runs at 16 kHz: a
   capture at another rate is resampled to it and back, and above 8 kHz each source gets
-  microphone 0 weighted by its share of 6 to 8 kHz. It does no harm where it cannot help: a lone source's track is microphone 0 itself, and :func:`informed`'s
-  guard (:data:`GUARD`) gives microphone 0, flagged, for a source that the array cannot tell
-  from the others over enough of the spectrum, or that the network gives too little of it.
+  microphone 0 weighted by its share of 6 to 8 kHz. It does no harm where it cannot help: a
+  lone source's track is microphone 0 itself, and :func:`informed`'s guard (:data:`GUARD`)
+  gives microphone 0, flagged, for a source that the array cannot tell from the others over
+  enough of the spectrum, or that the network gives too little of it.
 
 Every method returns an array (k, samples), the capture's length, in the order of
 ``positions`` for ``informed``.
@@ -352,7 +353,7 @@ def informed(capture: Capture, positions: np.ndarray, *, guard: bool = True) -> 
         top = freqs >= 6000
         rho = np.einsum("tf,tfk->k", power[:, top], share[:, top]) / (power[:, top].sum() + 1e-30)
         y = y + rho[:, None] * high[None]
-    keep = (distinct >= GUARD["distinct"]) & (mass >= GUARD["share"]) if guard else np.ones(k_src, bool)
+    keep = passes_guard(distinct, mass) if guard else np.ones(k_src, bool)
     y[~keep] = capture.audio[0]
     return Informed(y, keep, distinct, mass)
 
@@ -364,6 +365,21 @@ the others' over at least ``distinct`` of microphone 0's power and the network g
 tuning walks (``benchmarks/bench_localization.py``, seeds 9000 +, located positions) the
 sources below either bound lost 3 dB SI-SDR in the median against the microphone; with the
 guard 79 % of the tracks are at least as good as the microphone (52 % without)."""
+
+
+def passes_guard(distinct: np.ndarray, share: np.ndarray) -> np.ndarray:
+    """Which sources :data:`GUARD` lets :func:`informed` keep its track of.
+
+    Parameters
+    ----------
+    distinct, share : numpy.ndarray [shape=(K,)]
+        :attr:`Informed.distinct` and :attr:`Informed.share`.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(K,)], bool
+    """
+    return (np.asarray(distinct) >= GUARD["distinct"]) & (np.asarray(share) >= GUARD["share"])
 
 
 def _at_rate(x: np.ndarray, rate: int, fs: int, n: int) -> np.ndarray:

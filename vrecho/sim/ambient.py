@@ -46,13 +46,15 @@ class Shoebox:
     dims: tuple[float, float, float]
     rt60_s: float
 
-    def contains(self, p: np.ndarray) -> np.ndarray:
-        """Whether points lie strictly inside the room.
+    def contains(self, p: np.ndarray, *, margin_m: float = 0.0) -> np.ndarray:
+        """Whether points lie strictly inside the room (as :meth:`vrecho.scene.Room.contains`).
 
         Parameters
         ----------
         p : numpy.ndarray [shape=(N, 3) or (3,)]
             Points in metres.
+        margin_m : float
+            Least distance from every wall, the floor and the ceiling, in metres; 0 by default.
 
         Returns
         -------
@@ -60,7 +62,7 @@ class Shoebox:
             True for each point inside.
         """
         p = np.atleast_2d(p)
-        return np.all((p > 0) & (p < np.asarray(self.dims)), axis=1)
+        return np.all((p > margin_m) & (p < np.asarray(self.dims) - margin_m), axis=1)
 
 
 @dataclass

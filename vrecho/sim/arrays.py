@@ -28,7 +28,7 @@ from ..scene import Room, Scene
 from ..signals import colored_noise
 from .ambient import AMBIENT_KINDS, PROTOCOL_SOUNDS, AmbientSource, Shoebox, SimulatedCapture, random_walk, simulate_walk_capture
 from .scenes import CEILING_MATERIALS, FLOOR_MATERIALS, WALL_MATERIALS, random_furniture
-from .sounds import HIGH_PASS_HZ, ambient_sound
+from .sounds import ambient_sound, radiated
 
 CONDITIONS = ("reference", "flat 9x5", "any array", "two mics", "eight mics", "few poses", "head turning",
               "capture length", "44.1/48 kHz", "polygon room", "RT60 to 1 s", "one source", "four sources",
@@ -186,8 +186,7 @@ def source_sound(kind: str, duration_s: float, fs: int, rng: np.random.Generator
         blade = rng.uniform(20, 60)  # the blades' pass: a low tone and its harmonics over the air's noise
         x = colored_noise(n, rng.uniform(0.5, 1.2), rng) * (1 + 0.1 * np.sin(2 * np.pi * blade * t))
         x += sum(0.3 / k * np.sin(2 * np.pi * blade * k * t + rng.uniform(0, 6.3)) for k in range(1, 6)) * np.std(x)
-        x = scipy.signal.sosfilt(scipy.signal.butter(2, HIGH_PASS_HZ, "highpass", fs=fs, output="sos"), x)
-        return (0.8 * x / np.abs(x).max()).astype(np.float32)
+        return radiated(x, fs)
     if kind == "now_and_then":  # a talker: bursts of 0.4 to 1.2 s, silences of 0.5 to 2.5 s
         x = ambient_sound("speech", duration_s, fs, rng)
         gate, t = np.zeros(len(x), np.float32), int(rng.uniform(0, 0.8) * fs)
@@ -277,20 +276,15 @@ def envelope_walk(rng: np.random.Generator, condition: str = "envelope", *, cach
             fp = room.room.footprint
             lo, hi = np.r_[fp.min(axis=0), 0.0], np.r_[fp.max(axis=0), room.room.height_m]
             inside = room.room.contains
+            poses = _walk(rng, inside, lo, hi, n_poses, turn, array)
         else:  # random_walk's room and arc, the head turned further where the condition turns it
             rt60 = rng.uniform(0.8, 1.0) if condition == "RT60 to 1 s" else rng.uniform(0.2, 1.0) if every else rng.uniform(0.2, 0.8)
             room, _, poses = random_walk(rng, 0, float(rt60), n_poses=n_poses, segment_s=segment)
-            lo, hi = np.zeros(3), np.asarray(room.dims)
-
-            def inside(p, margin_m=0.0, hi=hi):
-                p = np.atleast_2d(p)
-                return np.all((p > margin_m) & (p < hi - margin_m), axis=1)
+            lo, hi, inside = np.zeros(3), np.asarray(room.dims), room.contains
             if turn[1] > 0.1:
                 poses = [_turned(p, rng, turn) for p in poses]
-            if not all(inside(p.microphones(array), 0.05).all() for p in poses):
+            if not all(inside(p.microphones(array), margin_m=0.05).all() for p in poses):
                 continue
-        if polygon:
-            poses = _walk(rng, inside, lo, hi, n_poses, turn, array)
         if poses is None:
             continue
         if polygon and rng.random() < 0.8:  # furniture, clear of the walk

@@ -83,9 +83,26 @@ def ambient_sound(kind: str, duration_s: float, fs: int, rng: np.random.Generato
         x = _repeated(kind, n, fs, rng)
     else:
         raise VrechoError(f"sound: expected one of {KINDS + SOUNDS}, got {kind!r}")
-    # What a source radiates and a microphone takes in: nothing below some 40 Hz (the voice's
-    # glottal pulses through its formants and the fans' brown noise left a third of their power
-    # below 20 Hz, which no direction or mask can share out)
+    return radiated(x, fs)
+
+
+def radiated(x: np.ndarray, fs: int) -> np.ndarray:
+    """A generated sound as a source radiates it and a microphone takes it in: high-passed at
+    :data:`HIGH_PASS_HZ` (the voice's glottal pulses through its formants and a fan's brown noise
+    left a third of their power below 20 Hz, which no direction or mask can share out), peak 0.8.
+
+    Parameters
+    ----------
+    x : numpy.ndarray [shape=(n,)]
+        The sound.
+    fs : int
+        Its sample rate in Hz.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(n,)], float32
+        Peak 0.8 (all zeros where it is silent).
+    """
     x = scipy.signal.sosfilt(scipy.signal.butter(2, HIGH_PASS_HZ, "highpass", fs=fs, output="sos"), x)
     peak = np.max(np.abs(x))
     return (0.8 * x / peak).astype(np.float32) if peak > 0 else x.astype(np.float32)
