@@ -311,3 +311,28 @@ def test_the_callback_is_sounddevices_and_on_alert_hears_each_change(glass_room)
     assert np.array_equal(played[:, 0], played[:, 1])
     e = mon.schedule.emission(3)
     assert np.allclose(played[e:e + mon.schedule.length, 0], mon.schedule.probe(3), atol=1e-6)
+
+
+def test_a_surface_is_found_among_dense_stray_peaks():
+    # Three pulses, each with 30 stray peaks over the range (two other headsets' pings and their
+    # reverberation) and one surface's echo nearing at 1.3 m/s: the surface starts a track with
+    # its speed from its three echoes nearly always (a stray line as straight may take one of
+    # them: the next pulses find it again), and the stray peaks start a few lines a pulse.
+    from vrecho.headset.tracks import initiate
+
+    rng = np.random.default_rng(0)
+    times = [0.0, 0.041, 0.083]
+    found, stray_lines = 0, 0
+    for _ in range(100):
+        pulses = []
+        for t in times:
+            stray = [(float(d), float(a)) for d, a in zip(rng.uniform(0.12, 4.0, 30), rng.exponential(0.01, 30))]
+            echo = (1.5 - 1.3 * t + float(rng.normal(0, 0.001)), 0.01)
+            pulses.append((t, sorted(stray + [echo]), 31 / 3.88, 0.01))
+        tracks = initiate(pulses)
+        surface = [tr for tr in tracks if abs(tr.dists[-1] - (1.5 - 1.3 * times[-1])) < 0.003
+                   and abs(tr.speed + 1.3) < 0.15 and len(tr.times) == 3]
+        found += bool(surface)
+        stray_lines += len(tracks) - len(surface)
+        assert sum(len(e) for _, e, _, _ in pulses) <= 93 - 2 * len(tracks)  # the echoes taken are no longer free
+    assert found >= 90 and stray_lines / 100 < 5.0

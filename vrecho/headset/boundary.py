@@ -22,9 +22,11 @@ monitor's own seed (a faint tick), and:
    ``L = sqrt((2 d)^2 + s^2)`` (``s``: loudspeaker to microphone): ``d`` follows.
 2. **Tracking.** Echo distances are chained over pulses into tracks (the closest pairs of echo
    and prediction first, within each track's gate: 12 cm while young, then five times its rms
-   residual, at least 4 cm, so a stray peak seldom joins it); an alpha-beta filter, started from
-   its first two echoes' speed (a fast walk's echo moves 8 cm a pulse), gives each track's
-   distance and closing speed.
+   residual, at least 4 cm, so a stray peak seldom joins it); a track starts from three echoes
+   no track took that lie in a line over three pulses at a walking pace (:func:`~.tracks.initiate`:
+   one echo says nothing of its speed, and where other headsets' pings crowd the range a track
+   started from one took the stray peak nearest it and lost the surface's, 8 cm on at a fast
+   walk); an alpha-beta filter gives each track's distance and closing speed.
 3. **Alerts with hysteresis.** Only surfaces the wearer moves toward count (``approach_m``
    nearer within 0.8 s, in the last second) and will not pass by: a point at lateral offset
    ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, so a quadratic fit over the last 0.3 to 0.6 s
@@ -69,7 +71,7 @@ from ..signals import SPEED_OF_SOUND
 from .echoes import EchoFinder, echo_path, mic_geometry
 from .ranging import GUARD, Envelope, ProbeSchedule, channel0, clipped, pcm_scale, probe_codes, zero_runs
 from .roundtrip import RoundTrip
-from .tracks import Track, associate, clutter_strength
+from .tracks import Track, associate, clutter_strength, initiate
 from .view import look_all
 
 
@@ -250,6 +252,7 @@ class BoundaryMonitor:
         self._searched = -self.period  # samples received at the last search for the round trip
         self._next = 0  # the next pulse to commit
         self._tracks: list[Track] = []
+        self._fresh: list[tuple] = []  # the last pulses' echoes no track took (tracks.initiate)
         self._alert = self._verdict = Alert(flags=("unlocked",))  # the alert returned; the last judgement behind it
         self._verdict_track: Track | None = None  # the surface it rests on
         self._oldest_approach = np.inf  # the earliest approached_at among the surfaces judged
@@ -592,17 +595,24 @@ class BoundaryMonitor:
         updated = []
         clutter = len(echoes) / (self.max_range_m - self.min_range_m)  # peaks per metre in this pulse
         mean_strength = clutter_strength(echoes)
+        fresh = []
         for tr, d, strength in associate(self._tracks, t, echoes):
             if tr is None:
-                tr = Track()
-                self._tracks.append(tr)
+                fresh.append((d, strength))
+                continue
             tr.update(t, d, strength, clutter_per_m=clutter, clutter_strength=mean_strength)
-            if tr.closed_in(0.8) >= self.approach_m:
-                tr.approached_at = t
             updated.append(tr)
         for tr in self._tracks:
             if tr.times[-1] != t:
                 tr.missed()
+        # New surfaces: three echoes no track took, in a line over the last three pulses.
+        self._fresh = self._fresh[-2:] + [(t, fresh, clutter, mean_strength)]
+        born = initiate(self._fresh)
+        self._tracks += born
+        updated += born
+        for tr in updated:
+            if tr.closed_in(0.8) >= self.approach_m:
+                tr.approached_at = t
         # Only a surface being approached can need an alert: the fits are for those.
         still = self._still = [tr.d_hat for tr in self._tracks
                                if len(tr.times) >= 10 and tr.speed is not None and abs(tr.speed) < 0.25

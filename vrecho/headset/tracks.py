@@ -2,7 +2,8 @@
 speed (an alpha-beta filter), whether it lies in the wearer's way (the closest point of approach,
 :meth:`Track.in_the_way`) or is a second-order echo passing by (:meth:`Track.explained_by`), and
 what the headset's camera made of it. :class:`~vrecho.headset.BoundaryMonitor` keeps them, and
-gives each pulse's echoes to them with :func:`associate`.
+gives each pulse's echoes to them with :func:`associate`, and starts new ones from the echoes
+left over with :func:`initiate`.
 """
 
 from __future__ import annotations
@@ -454,6 +455,69 @@ class Track:
             p2, p1, p0, inv, rss, _ = fit
             n = len(keep)
         return p2, p1, p0, inv, rss, n
+
+
+def initiate(pulses, *, tolerance_m: float = 0.006, approach_mps: float = 2.6, recede_mps: float = 0.6) -> list[Track]:
+    """New tracks from the echoes no track took in the last three pulses: three, one a pulse, that
+    lie on a line in time (within ``tolerance_m`` of it at the middle pulse) at a walking pace.
+
+    One echo alone says nothing of its surface's speed: where stray peaks are dense (another
+    headset's pings and their reverberation, some 30 a pulse), a track started from one echo
+    took the stray peak nearest it as its second and lost the surface's, which had moved on (a
+    fast walk's echo moves 8 cm a pulse). Three in a line are seldom stray (some 2 % of a
+    pulse's peaks by chance where 30 crowd it; the tracks' scores weigh what is left), and they
+    give the speed. The likeliest lines first (nearest the middle echo); each of the older echoes
+    starts one track at most, the newest two (a stray line through it, by chance as straight,
+    would take it from its surface's: the next pulse's echo tells the two apart).
+
+    Parameters
+    ----------
+    pulses : sequence of tuple
+        The last pulses, oldest first: (t, echoes, clutter_per_m, clutter_strength), ``t`` the
+        pulse's emission in seconds, ``echoes`` the (distance in metres, strength) pairs no
+        track took, sorted by distance, and the pulse's stray-peak density and mean strength
+        (:meth:`Track.update`). Only the last three are read.
+    tolerance_m : float
+        How far, in metres, the middle echo may lie from the line through the other two.
+    approach_mps, recede_mps : float
+        The fastest approach and retreat a line may have, in m/s.
+
+    Returns
+    -------
+    list of Track
+        Each with its three echoes (:meth:`Track.update`, in order); the echoes taken are
+        removed from ``pulses``' lists.
+    """
+    if len(pulses) < 3:
+        return []
+    (t2, e2, c2, s2), (t1, e1, c1, s1), (t0, e0, c0, s0) = pulses[-3:]
+    if not (e0 and e1 and e2) or not t2 < t1 < t0:
+        return []
+    d0, d1, d2 = (np.fromiter((d for d, _ in e), float, len(e)) for e in (e0, e1, e2))
+    speed = (d0[:, None] - d2[None, :]) / (t0 - t2)
+    i0, i2 = np.nonzero((speed >= -approach_mps) & (speed <= recede_mps))
+    if not len(i0):
+        return []
+    middle = d2[i2] + speed[i0, i2] * (t1 - t2)
+    j = np.clip(np.searchsorted(d1, middle), 1, len(d1) - 1) if len(d1) > 1 else np.zeros(len(middle), int)
+    if len(d1) > 1:
+        j = np.where(np.abs(d1[j - 1] - middle) < np.abs(d1[j] - middle), j - 1, j)
+    miss = np.abs(d1[j] - middle)
+    keep = np.flatnonzero(miss < tolerance_m)
+    out, used0, used1, used2 = [], {}, set(), set()
+    for k in keep[np.argsort(miss[keep], kind="stable")].tolist():
+        a, b, c = int(i0[k]), int(j[k]), int(i2[k])
+        if used0.get(a, 0) >= 2 or b in used1 or c in used2:
+            continue
+        used0[a] = used0.get(a, 0) + 1
+        used1.add(b), used2.add(c)
+        tr = Track()
+        for t, (d, strength), clutter, mean in ((t2, e2[c], c2, s2), (t1, e1[b], c1, s1), (t0, e0[a], c0, s0)):
+            tr.update(t, d, strength, clutter_per_m=clutter, clutter_strength=mean)
+        out.append(tr)
+    for e, used in ((e0, used0), (e1, used1), (e2, used2)):
+        e[:] = [x for i, x in enumerate(e) if i not in used]
+    return out
 
 
 def associate(tracks: list, t: float, echoes) -> list[tuple[Track | None, float, float]]:
