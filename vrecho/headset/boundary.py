@@ -65,13 +65,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from ..errors import VrechoError, check_count, check_number
 from ..signals import SPEED_OF_SOUND
-from .echoes import EchoFinder, echo_path, mic_geometry
+from .echoes import EchoFinder, _echoes, echo_path, mic_geometry
 from .ranging import GUARD, Envelope, ProbeSchedule, channel0, clipped, pcm_scale, probe_codes, zero_runs
 from .roundtrip import RoundTrip
-from .tracks import Track, associate, clutter_strength, initiate
+from .tracks import Track, _assign, _closest_approach, _lines, associate, clutter_strength, initiate
 from .view import look_all
 
 
@@ -258,11 +259,13 @@ class BoundaryMonitor:
         self._oldest_approach = np.inf  # the earliest approached_at among the surfaces judged
         self._judge_at = np.inf  # when the wearer, walking on, reaches the next threshold (seconds): judge again then
         self._stage = np.zeros(_STAGE, np.float32)
+        self._block = np.zeros(0, np.float32)  # the block being read, as float32 (reused)
         self._ends_for, self._ends = -1, []  # the pulse whose echoes' lags _echo_ends gave, and those lags
         self._still: list[float] = []  # distances of the surfaces that stay put, at the last commit
         self._level = "clear"
         self._echoes = EchoFinder(probes, fs, self.window, threshold=threshold, min_range_m=min_range_m,
                                   max_range_m=max_range_m, mic_offset_m=mic_offset_m)
+        compile_kernels()
 
     # -- The callback ------------------------------------------------------------------------------
     def __call__(self, mic, speaker=None) -> Alert:
@@ -361,33 +364,29 @@ class BoundaryMonitor:
             x = (x.astype(np.float32) - offset) / scale
         self._written += n
         staged = self._staged
-        with np.errstate(over="ignore"):  # a float64 sample beyond float32's range is infinite: not finite, as NaN
-            if staged + n < _STAGE:  # small blocks wait for a few milliseconds' worth (the work is per block)
-                self._stage[staged:staged + n] = x
-                self._staged += n
-                return self._alert
-            if staged:
-                x = np.concatenate([self._stage[:staged], x.astype(np.float32, copy=False)])
-                n, self._staged = len(x), 0
-            else:
-                x = x.astype(np.float32, copy=True)
+        if staged + n < _STAGE:  # small blocks wait for a few milliseconds' worth (the work is per block)
+            _take(x, self._stage, staged)
+            self._staged += n
+            return self._alert
+        if len(self._block) < staged + n:
+            self._block = np.empty(staged + n, np.float32)
+        got = self._block[:staged + n]  # (pushed, a copy, before the next block overwrites it)
+        got[:staged] = self._stage[:staged]
+        top, nonfinite, zeros, at_top = _take(x, got, staged)  # (the usual block: one pass, no array)
+        x, n, self._staged = got, staged + n, 0
         flags = []
         valid = _TRUE[:n] if n <= len(_TRUE) else np.ones(n, bool)
-        mag = np.abs(x)
-        top = float(mag.max()) if n else 0.0
-        if not np.isfinite(top):  # (the usual block costs this one reduction and the two counts below)
+        if nonfinite:
             finite = np.isfinite(x)
             flags.append("nan")
             x[~finite] = 0.0
             valid = finite
-            mag = np.abs(x)
-            top = float(mag.max())
-        if np.count_nonzero(x) < n:
-            zeros = zero_runs(x, 32) & valid
-            if zeros.any():
+        if zeros or nonfinite:
+            zero = zero_runs(x, 32) & valid
+            if zero.any():
                 flags.append("dropout")
-                valid = valid & ~zeros
-        if top > 0 and np.count_nonzero(mag >= top * (1 - 1e-6)) >= 3 and clipped(x):
+                valid = valid & ~zero
+        if top > 0 and at_top >= 3 and clipped(x):
             flags.append("clipped")
             self._clipped_at = self._now + n
         size = self._env.size // 2
@@ -697,6 +696,54 @@ class BoundaryMonitor:
             conf = min(len(tr.dists), 10) / 10 * min(1.0, sum(tr.strengths) / len(tr.strengths) * 200)
             self._verdict = Alert(level, float(d), "closed", conf, float(closing), None if np.isinf(ttc) else float(ttc),
                                   (), float(at))
+
+
+_COMPILED = False
+
+
+def compile_kernels() -> None:
+    """Compile the monitor's compiled kernels (numba), or load them from numba's cache, once per
+    process: the audio callback must never wait for a compiler. Some 8 s the first time after an
+    install (``install.sh`` does it), 0.2 s after; :class:`BoundaryMonitor` calls it."""
+    global _COMPILED
+    if _COMPILED:
+        return
+    out = np.zeros(8, np.float32)
+    for x in (np.zeros(8), np.zeros(8, np.float32), np.zeros((8, 2))[:, 0], np.zeros((8, 2), np.float32)[:, 0]):
+        _take(x, out, 0)  # (sounddevice's blocks: float32 or float64, channel 0 of several or one)
+    _echoes(np.ones(16, np.float32), 2, 3.5, 1.0, np.zeros(16), np.ones(2), 0.0, 0.007, 0.07, 0.0, 0.12, 4.0)
+    _closest_approach(np.arange(10.0), np.ones(10), np.array([0.6, 0.45]), 0.4)
+    _assign(np.ones(2), np.ones(2), np.ones(1), np.ones(1), 1.0)
+    _lines(np.ones(1), np.ones(1), np.ones(1), 0.5, -0.1, 0.1, 0.006)
+    _COMPILED = True
+
+
+@njit(cache=True, nogil=True)
+def _take(x, out, at):  # pragma: no cover (compiled)
+    """Write the samples ``x`` into ``out`` from ``at`` on as float32 (beyond its range: infinite,
+    without a warning), and read all of ``out[:at + len(x)]`` in one pass: its largest finite
+    magnitude, how many samples are not finite, how many are exactly 0, and how many lie within
+    1e-6 of the largest (a clipped block holds its rail)."""
+    n = at + len(x)
+    for i in range(len(x)):
+        out[at + i] = x[i]
+    top = 0.0
+    nonfinite = zeros = 0
+    for i in range(n):
+        v = abs(np.float64(out[i]))
+        if not np.isfinite(v):
+            nonfinite += 1
+        elif v == 0.0:
+            zeros += 1
+        elif v > top:
+            top = v
+    near = 0
+    least = top * (1 - 1e-6)
+    for i in range(n):
+        v = abs(np.float64(out[i]))
+        if least <= v < np.inf:
+            near += 1
+    return top, nonfinite, zeros, near
 
 
 _RANK = {"clear": 0, "caution": 1, "stop": 2}

@@ -5,13 +5,12 @@ an echo's delay after the direct sound into the distance of the surface ahead
 
 from __future__ import annotations
 
-import bisect
-
 import numpy as np
+from numba import njit
 from scipy.ndimage import maximum_filter1d
 
 from ..errors import VrechoError
-from ..signals import SPEED_OF_SOUND, analytic_envelope, analytic_filter, parabolic_peaks
+from ..signals import SPEED_OF_SOUND, analytic_envelope, analytic_filter
 from .ranging import GUARD, Envelope, at_rail
 
 
@@ -52,7 +51,7 @@ class EchoFinder:
         own = np.max([self._response(p, len(lag)) for p in self.probes], axis=0)  # (doubled: 6 dB of slack)
         self._sidelobe = np.maximum(floor, own)
         reach = int(np.flatnonzero(own > 10 ** (-40 / 20))[-1]) + 1  # an echo's own sidelobes above -40 dB
-        self._lobe_list = [1.0] + own[1:reach].tolist()
+        self._lobes = np.r_[1.0, own[1:reach]]
 
     @staticmethod
     def _response(x: np.ndarray, n_lags: int, probe: np.ndarray | None = None) -> np.ndarray:
@@ -117,41 +116,69 @@ class EchoFinder:
         if lo >= stop - 2:
             return []
         span = env.envelope(d0, stop)
-        peak_direct = float(env.envelope(d0 - 1, d0 + 2).max())
         sidelobe = self._sidelobe
         if clipped:
             rail = np.count_nonzero(at_rail(env.samples(d0, d0 + m)))
             if rail >= 3:  # the direct sound clipped: its distortion rises above the sidelobes, near it
                 sidelobe = self._clipped_sidelobe(rail / m, code)
-        seg = span[lo - d0:]
-        quarter = seg[::4]  # every 4th lag: the floor, at a quarter of the cost
-        noise = float(np.partition(quarter, len(quarter) // 2)[len(quarter) // 2]) + 1e-12
-        above = np.flatnonzero(seg[1:-1] > self.threshold * noise) + 1  # few: the echoes' main lobes
-        above = above[(seg[above] > seg[above - 1]) & (seg[above] >= seg[above + 1])]  # their local maxima
-        # The direct sound's matched-filter sidelobes fall off with lag; an echo must rise above them too.
-        peaks = above + lo - d0
-        peaks = peaks[span[peaks] > peak_direct * sidelobe[peaks]]
-        if len(peaks) > 1:
-            peaks = self._own_lobes_out(span, peaks)  # one echo per surface: its own sidelobes are not echoes
-        if not len(peaks):
-            return []
-        excess = SPEED_OF_SOUND * (parabolic_peaks(span, peaks) + d0 - ref) / self.fs
-        d = echo_distance(excess, *self._mic)
-        ok = (excess > 0) & (d >= self.min_range_m) & (d <= self.max_range_m)
-        return list(zip(d[ok].tolist(), (span[peaks][ok] / peak_direct).tolist()))
+        peak_direct = float(max(span[0], span[1], env.envelope(d0 - 1, d0)[0]))
+        d, strength = _echoes(span, lo - d0, self.threshold, peak_direct, sidelobe, self._lobes, d0 - ref,
+                              SPEED_OF_SOUND / self.fs, *self._mic, self.min_range_m, self.max_range_m)
+        return list(zip(d.tolist(), strength.tolist()))
 
-    def _own_lobes_out(self, span: np.ndarray, peaks: np.ndarray) -> np.ndarray:
-        """The peaks (in order) less those that are a stronger peak's own sidelobes: within reach
-        of it and no stronger, relative to it, than the codes' autocorrelation there (6 dB of
-        slack). A dozen peaks a pulse, few within reach of each other: plain floats."""
-        lobes, reach = self._lobe_list, len(self._lobe_list)
-        at, level = peaks.tolist(), span[peaks].tolist()
-        keep = []
-        for i, (p, v) in enumerate(zip(at, level)):
-            near = range(bisect.bisect_right(at, p - reach), bisect.bisect_left(at, p + reach))
-            if not any(v < level[j] and v <= level[j] * lobes[abs(at[j] - p)] for j in near):
-                keep.append(i)
-        return peaks[keep] if len(keep) < len(at) else peaks
+
+@njit(cache=True, nogil=True)
+def _echoes(span, lo, threshold, peak_direct, sidelobe, lobes, offset, metres_per_sample, spacing, forward,
+            min_range_m, max_range_m):  # pragma: no cover (compiled)
+    """:meth:`EchoFinder.find`'s core, compiled (a pulse's few hundred lags in one pass instead of
+    a score of array calls): the envelope ``span`` from the direct sound on, the floor the median
+    of every 4th lag from ``lo`` (a quarter of the cost), the echoes its local maxima above
+    ``threshold`` times the floor and above the direct sound's sidelobes, less those that are a
+    stronger peak's own sidelobes (within reach of it and no stronger, relative to it, than the
+    codes' autocorrelation there, ``lobes``), each timed by a parabola through three lags.
+    Returns their distances (metres) and strengths (shares of ``peak_direct``)."""
+    n = len(span)
+    quarter = span[lo::4].astype(np.float64)
+    quarter.sort()
+    floor = threshold * (quarter[len(quarter) // 2] + 1e-12)
+    at = np.empty(n, np.int64)
+    count = 0
+    for i in range(lo + 1, n - 1):
+        v = span[i]
+        if v > floor and v > span[i - 1] and v >= span[i + 1] and v > peak_direct * sidelobe[i]:
+            at[count] = i
+            count += 1
+    reach = len(lobes)
+    d = np.empty(count)
+    strength = np.empty(count)
+    kept = 0
+    for a in range(count):
+        p = at[a]
+        v = np.float64(span[p])
+        lobe = False
+        b = a - 1
+        while b >= 0 and p - at[b] < reach and not lobe:
+            u = np.float64(span[at[b]])
+            lobe = v < u and v <= u * lobes[p - at[b]]
+            b -= 1
+        b = a + 1
+        while b < count and at[b] - p < reach and not lobe:
+            u = np.float64(span[at[b]])
+            lobe = v < u and v <= u * lobes[at[b] - p]
+            b += 1
+        if lobe:
+            continue
+        y0, y1, y2 = np.float64(span[p - 1]), v, np.float64(span[p + 1])
+        den = y0 - 2.0 * y1 + y2
+        x = p + 0.5 * (y0 - y2) / den if den < 0 else np.float64(p)
+        excess = metres_per_sample * (x + offset)
+        path = excess + spacing
+        dist = 0.5 * (forward + np.sqrt(max(forward * forward - spacing * spacing + path * path, 0.0)))
+        if excess > 0 and min_range_m <= dist <= max_range_m:
+            d[kept] = dist
+            strength[kept] = v / peak_direct
+            kept += 1
+    return d[:kept], strength[:kept]
 
 
 def mic_geometry(mic_offset_m) -> tuple[float, float]:

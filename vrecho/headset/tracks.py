@@ -14,6 +14,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 
 _SIGMA_M = 0.01
@@ -77,43 +78,99 @@ def clutter_strength(echoes) -> float:
     return sum(a for _, a in echoes) / len(echoes) if len(echoes) >= 4 else 0.0
 
 
-def _solve(n, s1, s2, s3, s4, b0, b1, b2):
-    """Least squares of y on (u^2, u, 1) from its sums: (p2, p1, p0, the normal matrix's inverse),
-    or None when they do not determine a parabola."""
+@njit(cache=True, nogil=True)
+def _solve(n, s1, s2, s3, s4, b0, b1, b2):  # pragma: no cover (compiled)
+    """Least squares of y on (u^2, u, 1) from its sums: (ok, p2, p1, p0, the normal matrix's
+    inverse), ok False when they do not determine a parabola."""
     # The normal equations' matrix ((s4, s3, s2), (s3, s2, s1), (s2, s1, n)) is symmetric: its
     # cofactors over its determinant are its inverse.
     c00, c01, c02 = s2 * n - s1 * s1, -(s3 * n - s1 * s2), s3 * s1 - s2 * s2
     c11, c12, c22 = s4 * n - s2 * s2, -(s4 * s1 - s3 * s2), s4 * s2 - s3 * s3
     det = s4 * c00 + s3 * c01 + s2 * c02
+    inv = np.empty((3, 3))
     if abs(det) < 1e-18:
-        return None
-    inv = ((c00 / det, c01 / det, c02 / det), (c01 / det, c11 / det, c12 / det), (c02 / det, c12 / det, c22 / det))
-    return (inv[0][0] * b2 + inv[0][1] * b1 + inv[0][2] * b0, inv[1][0] * b2 + inv[1][1] * b1 + inv[1][2] * b0,
-            inv[2][0] * b2 + inv[2][1] * b1 + inv[2][2] * b0, inv)
+        return False, 0.0, 0.0, 0.0, inv
+    inv[0, 0], inv[0, 1], inv[0, 2] = c00 / det, c01 / det, c02 / det
+    inv[1, 0], inv[1, 1], inv[1, 2] = inv[0, 1], c11 / det, c12 / det
+    inv[2, 0], inv[2, 1], inv[2, 2] = inv[0, 2], inv[1, 2], c22 / det
+    return (True, inv[0, 0] * b2 + inv[0, 1] * b1 + inv[0, 2] * b0, inv[1, 0] * b2 + inv[1, 1] * b1 + inv[1, 2] * b0,
+            inv[2, 0] * b2 + inv[2, 1] * b1 + inv[2, 2] * b0, inv)
 
 
-def _quadratic(us: list, ys: list):
-    """Least squares of y on (u^2, u, 1) in plain floats (a few points: faster than arrays).
-
-    Returns (p2, p1, p0, the normal matrix's inverse, the residuals' sum of squares, the
-    residuals), or None when the points do not determine a parabola.
-    """
+@njit(cache=True, nogil=True)
+def _fit(us, ys, keep):  # pragma: no cover (compiled)
+    """Least squares of y on (u^2, u, 1) over the points ``keep`` says: (ok, p2, p1, p0, inverse,
+    the residuals' sum of squares, the residuals of all points)."""
     s1 = s2 = s3 = s4 = b0 = b1 = b2 = 0.0
-    for u, y in zip(us, ys):
-        u2 = u * u
-        s1 += u
-        s2 += u2
-        s3 += u2 * u
-        s4 += u2 * u2
-        b0 += y
-        b1 += u * y
-        b2 += u2 * y
-    fit = _solve(float(len(us)), s1, s2, s3, s4, b0, b1, b2)
-    if fit is None:
-        return None
-    p2, p1, p0, inv = fit
-    resid = [y - (p2 * u * u + p1 * u + p0) for u, y in zip(us, ys)]
-    return p2, p1, p0, inv, sum(r * r for r in resid), resid
+    n = 0
+    for i in range(len(us)):
+        if keep[i]:
+            u, y = us[i], ys[i]
+            u2 = u * u
+            s1 += u
+            s2 += u2
+            s3 += u2 * u
+            s4 += u2 * u2
+            b0 += y
+            b1 += u * y
+            b2 += u2 * y
+            n += 1
+    ok, p2, p1, p0, inv = _solve(float(n), s1, s2, s3, s4, b0, b1, b2)
+    resid = ys - (p2 * us * us + p1 * us + p0)
+    rss = 0.0
+    for i in range(len(us)):
+        if keep[i]:
+            rss += resid[i] * resid[i]
+    return ok, p2, p1, p0, inv, rss, resid
+
+
+@njit(cache=True, nogil=True)
+def _closest_approach(times, dists, spans, miss_m):  # pragma: no cover (compiled)
+    """:meth:`Track.in_the_way`'s fits, compiled: 1 in the way, 0 not, -1 cannot tell."""
+    t_last = times[-1]
+    for span_s in spans:
+        first = len(times)
+        while first > 0 and times[first - 1] >= t_last - span_s:
+            first -= 1
+        n = len(times) - first
+        if n < 8 or t_last - times[first] < 0.9 * span_s:
+            continue
+        us = times[first:][::-1] - t_last  # (newest first)
+        d = dists[first:][::-1]
+        ys = d * d
+        keep = np.ones(n, np.bool_)
+        ok, p2, p1, p0, inv, rss, resid = _fit(us, ys, keep)
+        if not ok:
+            continue
+        # An echo of another surface taken where two crossed in range strays from the others:
+        # when the fit's residual says one may (over 4 mm rms, a residual of d^2 being some 2 d
+        # times one of d), refit without the points beyond four times the residuals' median
+        # spread (and 5 mm).
+        if rss > 6.4e-5 * ys.sum():
+            spread = 4.0 * 1.4826 * np.sort(np.abs(resid))[n // 2]
+            for i in range(n):
+                keep[i] = abs(resid[i]) <= max(spread, 0.01 * d[i])
+            kept = keep.sum()
+            if 8 <= kept < n:
+                ok, p2, p1, p0, inv, rss, resid = _fit(us, ys, keep)
+                if not ok:
+                    continue
+                n = kept
+        if p2 <= 1e-3:  # not nearing at a steady pace (starting, stopping): cannot tell yet
+            continue
+        g0, g1 = p1 ** 2 / (4 * p2 ** 2), -p1 / (2 * p2)
+        var = 0.0
+        for r, gr in enumerate((g0, g1, 1.0)):
+            for c, gc in enumerate((g0, g1, 1.0)):
+                var += gr * inv[r, c] * gc
+        var *= rss / max(n - 3, 1)
+        a2 = p0 - p1 ** 2 / (4 * p2)
+        sigma = max(var, 0.0) ** 0.5
+        if -miss_m ** 2 < a2 - 2 * sigma and a2 + 2 * sigma < miss_m ** 2:  # far below 0 is a misfit
+            return 1
+        if a2 - 2 * sigma > miss_m ** 2:
+            return 0
+    return -1
 
 
 @dataclass
@@ -377,84 +434,10 @@ class Track:
             extrapolation, and a head's bob hides the curvature).
         """
         times, dists = self._history(extra)
-        t_last = times[-1]
-        # One backward pass in plain floats over the last points (some 15 a span), keeping each
-        # span's sums as the pass reaches its first point.
-        sums = {}
-        acc = [0.0] * 9  # n, sum u, u^2, u^3, u^4, y, u y, u^2 y, y^2 (u: time from the last point, y = d^2)
-        bounds = sorted(spans_s)
-        u = 0.0
-        for t, d in zip(reversed(times), reversed(dists)):
-            while bounds and t < t_last - bounds[0]:  # past the shortest open span's start
-                sums[bounds.pop(0)] = (tuple(acc), -u)
-            if not bounds:
-                break
-            u = t - t_last
-            u2, y = u * u, d * d
-            acc[0] += 1.0
-            acc[1] += u
-            acc[2] += u2
-            acc[3] += u2 * u
-            acc[4] += u2 * u2
-            acc[5] += y
-            acc[6] += u * y
-            acc[7] += u2 * y
-            acc[8] += y * y
-        for span_s in bounds:  # spans longer than the track
-            sums[span_s] = (tuple(acc), -u)
-        for span_s in spans_s:
-            (n, s1, s2, s3, s4, b0, b1, b2, yy), reach = sums[span_s]
-            if reach < 0.9 * span_s or n < 8:
-                continue
-            fit = _solve(n, s1, s2, s3, s4, b0, b1, b2)
-            if fit is None:
-                continue
-            p2, p1, p0, inv = fit
-            rss = max(yy - (p2 * b2 + p1 * b1 + p0 * b0), 0.0)
-            # An echo of another surface taken where two crossed in range strays from the
-            # others: when the fit's residual says one may (over 4 mm rms, a residual of d^2 being
-            # some 2 d times one of d), refit without the points beyond four times the residuals'
-            # median spread (and 5 mm).
-            if rss > 6.4e-5 * b0:  # (rss / n > (2 d 4 mm)^2, d^2 ~ b0 / n)
-                refit = self._robust(times, dists, t_last, span_s)
-                if refit is None:
-                    continue
-                p2, p1, p0, inv, rss, n = refit
-            if p2 <= 1e-3:  # not nearing at a steady pace (starting, stopping): cannot tell yet
-                continue
-            g = (p1 ** 2 / (4 * p2 ** 2), -p1 / (2 * p2), 1.0)
-            var = sum(g[r] * inv[r][c] * g[c] for r in range(3) for c in range(3)) * rss / max(n - 3, 1)
-            a2 = p0 - p1 ** 2 / (4 * p2)
-            sigma = max(var, 0.0) ** 0.5
-            if -miss_m ** 2 < a2 - 2 * sigma and a2 + 2 * sigma < miss_m ** 2:  # far below 0 is a misfit
-                return True
-            if a2 - 2 * sigma > miss_m ** 2:
-                return False
-        return None
-
-    @staticmethod
-    def _robust(times, dists, t_last: float, span_s: float):
-        """The span's fit without its stray points: (p2, p1, p0, inverse, rss, n) or None."""
-        us, ys = [], []
-        for t, d in zip(reversed(times), reversed(dists)):
-            if t < t_last - span_s:
-                break
-            us.append(t - t_last)
-            ys.append(d * d)
-        fit = _quadratic(us, ys)
-        if fit is None:
-            return None
-        p2, p1, p0, inv, rss, resid = fit
-        n = len(us)
-        spread = 4.0 * 1.4826 * sorted(abs(r) for r in resid)[n // 2]
-        keep = [i for i in range(n) if abs(resid[i]) <= max(spread, 0.01 * ys[i] ** 0.5)]
-        if 8 <= len(keep) < n:
-            fit = _quadratic([us[i] for i in keep], [ys[i] for i in keep])
-            if fit is None:
-                return None
-            p2, p1, p0, inv, rss, _ = fit
-            n = len(keep)
-        return p2, p1, p0, inv, rss, n
+        t = np.fromiter(times, float, len(times))
+        d = np.fromiter(dists, float, len(dists))
+        way = _closest_approach(t, d, np.asarray(spans_s, float), float(miss_m))
+        return None if way < 0 else bool(way)
 
 
 def initiate(pulses, *, tolerance_m: float = 0.006, approach_mps: float = 2.6, recede_mps: float = 0.6) -> list[Track]:
@@ -494,30 +477,81 @@ def initiate(pulses, *, tolerance_m: float = 0.006, approach_mps: float = 2.6, r
     if not (e0 and e1 and e2) or not t2 < t1 < t0:
         return []
     d0, d1, d2 = (np.fromiter((d for d, _ in e), float, len(e)) for e in (e0, e1, e2))
-    speed = (d0[:, None] - d2[None, :]) / (t0 - t2)
-    i0, i2 = np.nonzero((speed >= -approach_mps) & (speed <= recede_mps))
-    if not len(i0):
-        return []
-    middle = d2[i2] + speed[i0, i2] * (t1 - t2)
-    j = np.clip(np.searchsorted(d1, middle), 1, len(d1) - 1) if len(d1) > 1 else np.zeros(len(middle), int)
-    if len(d1) > 1:
-        j = np.where(np.abs(d1[j - 1] - middle) < np.abs(d1[j] - middle), j - 1, j)
-    miss = np.abs(d1[j] - middle)
-    keep = np.flatnonzero(miss < tolerance_m)
-    out, used0, used1, used2 = [], {}, set(), set()
-    for k in keep[np.argsort(miss[keep], kind="stable")].tolist():
-        a, b, c = int(i0[k]), int(j[k]), int(i2[k])
-        if used0.get(a, 0) >= 2 or b in used1 or c in used2:
-            continue
-        used0[a] = used0.get(a, 0) + 1
-        used1.add(b), used2.add(c)
+    lines = _lines(d0, d1, d2, (t1 - t2) / (t0 - t2), -approach_mps * (t0 - t2), recede_mps * (t0 - t2), tolerance_m)
+    out = []
+    for a, b, c in lines:
         tr = Track()
         for t, (d, strength), clutter, mean in ((t2, e2[c], c2, s2), (t1, e1[b], c1, s1), (t0, e0[a], c0, s0)):
             tr.update(t, d, strength, clutter_per_m=clutter, clutter_strength=mean)
         out.append(tr)
-    for e, used in ((e0, used0), (e1, used1), (e2, used2)):
-        e[:] = [x for i, x in enumerate(e) if i not in used]
+    for e, used in ((e0, {a for a, _, _ in lines}), (e1, {b for _, b, _ in lines}), (e2, {c for _, _, c in lines})):
+        if used:
+            e[:] = [x for i, x in enumerate(e) if i not in used]
     return out
+
+
+@njit(cache=True, nogil=True)
+def _lines(d0, d1, d2, middle_at, least, most, tolerance_m):  # pragma: no cover (compiled)
+    """:func:`initiate`'s search, compiled: (i0, i1, i2) of the echoes (newest, middle, oldest
+    pulse; distances sorted) that lie in a line, the middle one within ``tolerance_m`` of where
+    the other two put it (``middle_at`` of the way from the oldest), the newest ``least`` to
+    ``most`` metres from the oldest; the nearest to a line first, each older echo in one line
+    at most, the newest in two."""
+    found, misses = [], []
+    for a in range(len(d0)):
+        for c in range(len(d2)):
+            step = d0[a] - d2[c]
+            if step < least or step > most:
+                continue
+            middle = d2[c] + step * middle_at
+            b = np.searchsorted(d1, middle)
+            if b == len(d1) or (b > 0 and abs(d1[b - 1] - middle) < abs(d1[b] - middle)):
+                b -= 1
+            miss = abs(d1[b] - middle)
+            if miss < tolerance_m:
+                found.append((a, b, c))
+                misses.append(miss)
+    out = []
+    if not found:
+        return out
+    used0 = np.zeros(len(d0), np.int64)
+    used1 = np.zeros(len(d1), np.bool_)
+    used2 = np.zeros(len(d2), np.bool_)
+    for k in np.argsort(np.array(misses), kind="mergesort"):
+        a, b, c = found[k]
+        if used0[a] >= 2 or used1[b] or used2[c]:
+            continue
+        used0[a] += 1
+        used1[b] = True
+        used2[c] = True
+        out.append((a, b, c))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _assign(d, strength, predicted, gates, mean):  # pragma: no cover (compiled)
+    """:func:`associate`'s pairing, compiled: for each echo, the track it joins (-1: none), the
+    likeliest pairs within the gates first (the score's terms, :meth:`Track.update`)."""
+    js, iis, costs = [], [], []
+    for j in range(len(d)):
+        llr = 0.0
+        if mean > 0.0:
+            x = strength[j] / mean - 1.0
+            llr = -1.0 if x < -1.0 else 3.0 if x > 3.0 else x  # (amplitude_llr)
+        for i in range(len(predicted)):
+            gap = abs(d[j] - predicted[i])
+            if gap < gates[i]:
+                js.append(j)
+                iis.append(i)
+                costs.append(0.5 * (gap / _SIGMA_M) ** 2 - llr)
+    track_of = np.full(len(d), -1, np.int64)
+    taken = np.zeros(len(predicted), np.bool_)
+    for k in np.argsort(np.array(costs), kind="mergesort"):
+        j, i = js[k], iis[k]
+        if track_of[j] < 0 and not taken[i]:
+            track_of[j] = i
+            taken[i] = True
+    return track_of
 
 
 def associate(tracks: list, t: float, echoes) -> list[tuple[Track | None, float, float]]:
@@ -547,19 +581,10 @@ def associate(tracks: list, t: float, echoes) -> list[tuple[Track | None, float,
     if tracks and echoes:
         predicted = np.array([tr.d_hat + (tr.speed or 0.0) * (t - tr.times[-1]) for tr in tracks])
         gates = np.array([tr.gate_m for tr in tracks])
-        gap = np.abs(np.array([d for d, _ in echoes])[:, None] - predicted[None, :])
-        js, iis = np.nonzero(gap < gates[None, :])
-        if len(js):
-            taken = set()
-            cost = 0.5 * (gap[js, iis] / _SIGMA_M) ** 2  # (the score's terms: see Track.update)
-            mean = clutter_strength(echoes)
-            if mean > 0.0:
-                cost -= np.array([amplitude_llr(echoes[j][1], mean) for j in js.tolist()])
-            for k in np.argsort(cost, kind="stable").tolist():
-                j, i = int(js[k]), int(iis[k])
-                if j not in track_of and i not in taken:
-                    track_of[j] = i
-                    taken.add(i)
+        d, strength = np.array(echoes).T.copy()  # (contiguous, as the compiled kernel was made for)
+        for j, i in enumerate(_assign(d, strength, predicted, gates, clutter_strength(echoes)).tolist()):
+            if i >= 0:
+                track_of[j] = i
     out = [(tracks[i], echoes[j][0], echoes[j][1]) for j, i in track_of.items()]
     claimed = sorted(d for _, d, _ in out)
     new = []
