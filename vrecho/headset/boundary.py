@@ -72,7 +72,7 @@ from ..signals import SPEED_OF_SOUND
 from .echoes import EchoFinder, _echoes, echo_path, mic_geometry
 from .ranging import GUARD, Envelope, ProbeSchedule, channel0, clipped, pcm_scale, probe_codes, zero_runs
 from .roundtrip import RoundTrip
-from .tracks import Track, _assign, _closest_approach, _lines, associate, clutter_strength, initiate
+from .tracks import Track, _assign, _closest_approach, _lines, _passing, associate, clutter_strength, initiate
 from .view import look_all
 
 
@@ -713,6 +713,7 @@ def compile_kernels() -> None:
         _take(x, out, 0)  # (sounddevice's blocks: float32 or float64, channel 0 of several or one)
     _echoes(np.ones(16, np.float32), 2, 3.5, 1.0, np.zeros(16), np.ones(2), 0.0, 0.007, 0.07, 0.0, 0.12, 4.0)
     _closest_approach(np.arange(10.0), np.ones(10), np.array([0.6, 0.45]), 0.4)
+    _passing(np.arange(10.0), np.ones(10), np.array([0.5]), 0.6)
     _assign(np.ones(2), np.ones(2), np.ones(1), np.ones(1), 1.0)
     _lines(np.ones(1), np.ones(1), np.ones(1), 0.5, -0.1, 0.1, 0.006)
     _COMPILED = True

@@ -341,7 +341,9 @@ class Envelope:
         m = self.m
         seg = self.samples(lo - GUARD, hi + m + GUARD - 1) if lo >= GUARD else \
             np.r_[np.zeros(GUARD - lo, np.float32), self.samples(0, hi + m + GUARD - 1)]
-        nfft = fft.next_fast_len(len(seg) + m + GUARD, real=True)
+        need = len(seg) + m + GUARD
+        nfft = 1 << (need - 1).bit_length()  # a power of two or three quarters of one: few sizes, their kernels kept
+        nfft = 3 * nfft // 4 if 3 * nfft // 4 >= need else nfft
         kernel = self._kernels.get((nfft, code))
         if kernel is None:
             sound = sum(self.probes) if code is None else self.probes[code]

@@ -125,6 +125,28 @@ def _fit(us, ys, keep):  # pragma: no cover (compiled)
 
 
 @njit(cache=True, nogil=True)
+def _passing(t, d, offsets, span_s):  # pragma: no cover (compiled)
+    """:meth:`Track.explained_by`'s test, compiled."""
+    first = np.searchsorted(t, t[-1] - span_s)
+    if len(t) - first < 8:
+        return False
+    t, d = t[first:], d[first:]
+    tc = t - t.mean()
+    tt = (tc * tc).mean()
+
+    def residual(x):  # mean square about its straight line in time
+        xc = x - x.mean()
+        return max((xc * xc).mean() - ((xc * tc).mean()) ** 2 / tt, 0.0)
+
+    frontal = residual(d)
+    nearest = d.min() - 0.02
+    for a in offsets:
+        if a < nearest and residual(np.sqrt(d * d - a * a)) < 0.49 * frontal:  # rms below 0.7 of it
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
 def _closest_approach(times, dists, spans, miss_m):  # pragma: no cover (compiled)
     """:meth:`Track.in_the_way`'s fits, compiled: 1 in the way, 0 not, -1 cannot tell."""
     t_last = times[-1]
@@ -173,7 +195,7 @@ def _closest_approach(times, dists, spans, miss_m):  # pragma: no cover (compile
     return -1
 
 
-@dataclass
+@dataclass(slots=True)
 class Track:
     """A surface the echoes follow over pulses, as :class:`~vrecho.headset.BoundaryMonitor` keeps it.
 
@@ -346,23 +368,11 @@ class Track:
         -------
         bool
         """
+        if not offsets:
+            return False
         times, dists = self._history(extra)
-        t = np.fromiter(times, float, len(times))
-        first = int(np.searchsorted(t, t[-1] - span_s))
-        if len(t) - first < 8 or not offsets:
-            return False
-        d = np.fromiter(dists, float, len(dists))[first:]
-        a = np.array([o for o in offsets if o < d.min() - 0.02])
-        if not len(a):
-            return False
-        tc = t[first:] - t[first:].mean()
-
-        def residual(x):  # mean square about each row's straight line in time
-            xc = x - x.mean(axis=-1, keepdims=True)
-            return np.maximum((xc * xc).mean(axis=-1) - (xc @ tc / len(tc)) ** 2 / (tc @ tc / len(tc)), 0.0)
-
-        frontal = residual(d)
-        return bool(np.any(residual(np.sqrt(d ** 2 - a[:, None] ** 2)) < 0.49 * frontal))  # rms below 0.7 of it
+        return _passing(np.fromiter(times, float, len(times)), np.fromiter(dists, float, len(dists)),
+                        np.asarray(offsets, float), float(span_s))
 
     def ahead_with(self, t: float, d: float, miss_m: float, still: list[float]) -> bool:
         """Whether the surface is in the way with one more echo, the history left as it is.
