@@ -3,9 +3,9 @@
 :class:`BoundaryMonitor` has the shape of a full-duplex audio callback: each call gets the
 microphone's block and fills the loudspeaker's block of the same length (:meth:`~BoundaryMonitor.callback`
 is sounddevice's ``Stream(callback=...)`` itself). It plays a ranging probe every 40 ms plus a
-dither of up to 5 ms: an 8 ms chirp, Tukey-windowed, up or down through 4-12 or 12-20 kHz (four
-codes, :data:`~.ranging.CODES_HZ`), the dither and the code of each pulse drawn from the
-monitor's own seed (a faint tick), and:
+dither of up to 5 ms: a 5 ms chirp, Tukey-windowed, up or down through 4-20 kHz (two codes,
+:data:`~.ranging.CODES_HZ`), the dither and the code of each pulse drawn from the monitor's own
+seed (a faint tick), and:
 
 0. **Its own round trip.** A real stream hands the loudspeaker's sound back 0 to 300 ms later
    (more on ordinary desktop and phone audio), unknown, and changes it by a block after an
@@ -13,8 +13,8 @@ monitor's own seed (a faint tick), and:
    dithered pulses arrive (:mod:`.roundtrip`), reports it (``alert.latency_s``), follows the
    clocks' drift and the steps, and while it is not locked says "unlocked" and raises no alarm
    ("no_direct_sound" after a second: a muted loudspeaker). Another headset's pings, dithered by
-   its own seed, land somewhere else every pulse, and three times in four in another code, 19
-   to 40 dB down: no track follows them.
+   its own seed, land somewhere else every pulse, and half the time in the other code, 20 dB
+   down: no track follows them.
 1. **Ranging.** The microphone's stream is correlated with each pulse's code as it arrives (the
    envelope, :class:`~.ranging.Envelope`); each pulse's own direct sound is its time reference;
    echo peaks above the noise floor and the direct sound's sidelobes are timed to a fraction of a
@@ -45,6 +45,10 @@ judged again whenever something it rests on changes: a pulse's window completes,
 approach grows a second old, the wearer walks on to the next threshold, or the echo of the pulse
 still arriving of a surface near a threshold has come in (that pulse is then analysed in the block
 its echo ends, an undecided surface asked again with it).
+
+The per-pulse work (a pulse's echoes, the association, the lines that start tracks, the
+closest-approach fits, each block's read) runs in kernels compiled by numba and cached
+(:func:`compile_kernels`, at install and when the first monitor is made, never in the callback).
 
 Robustness: clipped samples are flagged (the timing survives clipping, and the clipped direct
 sound's distortion is kept out); runs of exact zeros (dropouts) and non-finite samples are
