@@ -39,6 +39,10 @@ seed (a faint tick), and:
    pulse may have left as soon as it was written). *caution* when time to contact is under
    ``caution_ttc_s`` or distance under ``caution_m``, *stop* under ``stop_m``; an alert ends only
    ``hysteresis_m`` beyond its threshold (or when the surface stops approaching for a second).
+   A surface that closes at under half the wearer's pace (the fastest any surface heard nears
+   or recedes, over the last second or so) lies far to the side: a wall converged on at 10
+   degrees while walking through a door, a metre away. Its time to contact cautions, not its
+   distance.
 
 The alert is the gravest any surface in the way calls for (the soonest to contact among equals),
 judged again whenever something it rests on changes: a pulse's window completes, a surface's
@@ -267,6 +271,7 @@ class BoundaryMonitor:
         self._ends_for, self._ends = -1, []  # the pulse whose echoes' lags _echo_ends gave, and those lags
         self._still: list[float] = []  # distances of the surfaces that stay put, at the last commit
         self._level = "clear"
+        self._pace, self._paced_at = 0.0, 0.0  # the wearer's pace, at least, and when it was judged (_judge)
         self._echoes = EchoFinder(probes, fs, self.window, threshold=threshold, min_range_m=min_range_m,
                                   max_range_m=max_range_m, mic_offset_m=mic_offset_m)
         compile_kernels()
@@ -637,13 +642,15 @@ class BoundaryMonitor:
         if len(self._tracks) > 32:  # clutter: keep the likeliest surfaces, then the nearest
             self._tracks = sorted(self._tracks, key=lambda tr: (-tr.score, tr.dists[-1]))[:32]
 
-    def _level_for(self, d: float, ttc: float) -> str:
+    def _level_for(self, d: float, ttc: float, aside: bool = False) -> str:
         """The alert a surface at ``d`` m, ``ttc`` s from contact calls for, with hysteresis
-        (an alert ends only ``hysteresis_m`` beyond its threshold)."""
+        (an alert ends only ``hysteresis_m`` beyond its threshold); one ``aside`` (far off the
+        wearer's way: it closes at under half the pace of the surfaces ahead) cautions by its
+        time to contact only, not by its distance."""
         h = self.hysteresis_m
         if d < self.stop_m + (h if self._level == "stop" else 0.0):
             return "stop"
-        if (d < self.caution_m + (h if self._level != "clear" else 0.0)
+        if ((d < self.caution_m + (h if self._level != "clear" else 0.0) and not aside)
                 or ttc < self.caution_ttc_s * (1.1 if self._level != "clear" else 1.0)):
             return "caution"
         return "clear"
@@ -660,6 +667,16 @@ class BoundaryMonitor:
                     provisional[id(tr)] = d
         self._oldest_approach = np.inf
         self._judge_at = np.inf
+        # The wearer's pace, at least: the fastest any surface heard for a while nears or
+        # recedes (the wall behind recedes as fast as the wall ahead nears; as it was over the
+        # last second or so: slowing down at a door does not make the walls beside it ahead). A
+        # wall the wearer converges on at 10 degrees, a metre to the side (walking through a
+        # door), closes at a fifth of it: its time to contact tells whether it is in the way
+        # soon, not its distance.
+        pace = max((abs(tr.speed) for tr in self._tracks if tr.speed is not None and tr.confirmed and len(tr.times) >= 8
+                    and t_now - tr.times[-1] < 0.3), default=0.0)
+        self._pace = pace = max(pace, self._pace - (t_now - self._paced_at))  # (forgotten at 1 m/s a second)
+        self._paced_at = t_now
         for tr in self._tracks:
             if tr.ahead is False or (not tr.ahead and id(tr) not in provisional and (tr.speed or 0.0) > -0.5):
                 continue  # (neither in the way, nor asked again, nor nearing fast: most surfaces, cheaply)
@@ -672,7 +689,7 @@ class BoundaryMonitor:
             if t_now - tr.approached_at <= 1.0 and (tr.ahead or (
                     id(tr) in provisional and tr.ahead_with(t_pulse, provisional[id(tr)], self.miss_m, self._still))):
                 self._oldest_approach = min(self._oldest_approach, tr.approached_at)
-                level = self._level_for(d_now, ttc)
+                level = self._level_for(d_now, ttc, closing < 0.5 * pace)
             elif (len(tr.times) >= 5 and closing >= 0.5 and at - tr.times[-5] < 0.25 and tr.score >= _LOOMING
                   and d < self.caution_m and d / closing < 0.75):
                 # Not yet known to be in the way (the fit needs a third of a second of steady walking),
