@@ -52,7 +52,7 @@ its echo ends, an undecided surface asked again with it).
 
 The per-pulse work (a pulse's echoes, the association, the lines that start tracks, the
 closest-approach fits, each block's read) runs in kernels compiled by numba and cached
-(:func:`compile_kernels`, at install and when the first monitor is made, never in the callback).
+(:func:`~.kernels.compile_kernels`, at install and when the first monitor is made, never in the callback).
 
 Robustness: clipped samples are flagged (the timing survives clipping, and the clipped direct
 sound's distortion is kept out); runs of exact zeros (dropouts) and non-finite samples are
@@ -70,66 +70,17 @@ cameras alone cannot find glass: it takes both.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
-from numba import njit
 
 from ..errors import VrechoError, check_count, check_number
 from ..signals import SPEED_OF_SOUND
-from .echoes import EchoFinder, _echoes, echo_path, mic_geometry
+from .alert import Alert
+from .echoes import EchoFinder, echo_path, mic_geometry
+from .kernels import compile_kernels, take
 from .ranging import GUARD, Envelope, ProbeSchedule, channel0, clipped, pcm_scale, probe_codes, zero_runs
 from .roundtrip import RoundTrip
-from .tracks import Track, _assign, _closest_approach, _lines, _passing, associate, clutter_strength, initiate
+from .tracks import Track, associate, clutter_strength, initiate
 from .view import look_all
-
-
-@dataclass(frozen=True)
-class Alert:
-    """What the monitor says after a block.
-
-    Parameters
-    ----------
-    level : str
-        "clear", "caution" or "stop".
-    distance_m : float or None
-        The distance in metres of the surface the alert rests on (of those in the wearer's way,
-        the gravest, then the soonest to contact; None if none), as the pulse emitted at
-        ``pulse_time_s`` measured it. The level reckons with the wearer's walk since: the
-        pulse may have left as soon as it was written, a round trip before its echo came back.
-    surface : str or None
-        "wall", "glass", "mirror" (what the camera made of the surface,
-        :meth:`BoundaryMonitor.see`), "closed" (not yet seen), "opening" or None (see the
-        module's notes).
-    confidence : float
-        In [0, 1].
-    closing_speed_mps : float or None
-        That surface's closing speed in m/s (positive: nearing).
-    time_to_contact_s : float or None
-        That surface's time to contact in seconds, from now (None when it closes at 5 cm/s or
-        less).
-    flags : tuple of str
-        What was wrong with the input so far in this block ("nan", "dropout", "clipped"), and
-        the monitor's state: "unlocked" (its own direct sound not found yet, or lost after the
-        round trip changed: no alarm then), "no_direct_sound" (unlocked for over a second: the
-        loudspeaker muted, the microphone off?), "no_echo".
-    pulse_time_s : float or None
-        When (seconds, on the stream's clock, from the first sample) the pulse that measured
-        ``distance_m`` was written to the loudspeaker.
-    latency_s : float or None
-        The round trip the monitor is locked on, loudspeaker write to microphone read, in
-        seconds (None while unlocked).
-    """
-
-    level: str = "clear"
-    distance_m: float | None = None
-    surface: str | None = None
-    confidence: float = 0.0
-    closing_speed_mps: float | None = None
-    time_to_contact_s: float | None = None
-    flags: tuple[str, ...] = ()
-    pulse_time_s: float | None = None
-    latency_s: float | None = None
 
 
 class BoundaryMonitor:
@@ -374,14 +325,14 @@ class BoundaryMonitor:
         self._written += n
         staged = self._staged
         if staged + n < _STAGE:  # small blocks wait for a few milliseconds' worth (the work is per block)
-            _take(x, self._stage, staged)
+            take(x, self._stage, staged)
             self._staged += n
             return self._alert
         if len(self._block) < staged + n:
             self._block = np.empty(staged + n, np.float32)
         got = self._block[:staged + n]  # (pushed, a copy, before the next block overwrites it)
         got[:staged] = self._stage[:staged]
-        top, nonfinite, zeros, at_top = _take(x, got, staged)  # (the usual block: one pass, no array)
+        top, nonfinite, zeros, at_top = take(x, got, staged)  # (the usual block: one pass, no array)
         x, n, self._staged = got, staged + n, 0
         flags = []
         valid = _TRUE[:n] if n <= len(_TRUE) else np.ones(n, bool)
@@ -691,11 +642,13 @@ class BoundaryMonitor:
                 self._oldest_approach = min(self._oldest_approach, tr.approached_at)
                 level = self._level_for(d_now, ttc, closing < 0.5 * pace)
             elif (len(tr.times) >= 5 and closing >= 0.5 and at - tr.times[-5] < 0.25 and tr.score >= _LOOMING
-                  and d < self.caution_m and d / closing < 0.75):
+                  and d < self.caution_m and d / closing < 0.75 and tr.straight(8) < 0.005):
                 # Not yet known to be in the way (the fit needs a third of a second of steady walking),
                 # but near, nearing fast and steadily beyond doubt (stray peaks can line up for a few
-                # pulses where they are dense: the score weighs that): a surface rushed at from close by,
-                # or heard late, still warns (as measured: not reckoned on by the echo's age).
+                # pulses where they are dense: the score weighs that, and a surface's last eight
+                # echoes, or all it has, lie on a line within millimetres, where a still wall's track
+                # that took four of another headset's pings in a row bends): a surface rushed at from
+                # close by, or heard late, still warns (as measured: not reckoned on by the echo's age).
                 level = "caution"
             else:
                 continue  # not known to be in the way (asked again with the echo still arriving, if any)
@@ -717,55 +670,6 @@ class BoundaryMonitor:
             conf = min(len(tr.dists), 10) / 10 * min(1.0, sum(tr.strengths) / len(tr.strengths) * 200)
             self._verdict = Alert(level, float(d), "closed", conf, float(closing), None if np.isinf(ttc) else float(ttc),
                                   (), float(at))
-
-
-_COMPILED = False
-
-
-def compile_kernels() -> None:
-    """Compile the monitor's compiled kernels (numba), or load them from numba's cache, once per
-    process: the audio callback must never wait for a compiler. Some 8 s the first time after an
-    install (``install.sh`` does it), 0.2 s after; :class:`BoundaryMonitor` calls it."""
-    global _COMPILED
-    if _COMPILED:
-        return
-    out = np.zeros(8, np.float32)
-    for x in (np.zeros(8), np.zeros(8, np.float32), np.zeros((8, 2))[:, 0], np.zeros((8, 2), np.float32)[:, 0]):
-        _take(x, out, 0)  # (sounddevice's blocks: float32 or float64, channel 0 of several or one)
-    _echoes(np.ones(16, np.float32), 2, 3.5, 1.0, np.zeros(16), np.ones(2), 0.0, 0.007, 0.07, 0.0, 0.12, 4.0)
-    _closest_approach(np.arange(10.0), np.ones(10), np.array([0.6, 0.45]), 0.4)
-    _passing(np.arange(10.0), np.ones(10), np.array([0.5]), 0.6)
-    _assign(np.ones(2), np.ones(2), np.ones(1), np.ones(1), 1.0)
-    _lines(np.ones(1), np.ones(1), np.ones(1), 0.5, -0.1, 0.1, 0.006)
-    _COMPILED = True
-
-
-@njit(cache=True, nogil=True)
-def _take(x, out, at):  # pragma: no cover (compiled)
-    """Write the samples ``x`` into ``out`` from ``at`` on as float32 (beyond its range: infinite,
-    without a warning), and read all of ``out[:at + len(x)]`` in one pass: its largest finite
-    magnitude, how many samples are not finite, how many are exactly 0, and how many lie within
-    1e-6 of the largest (a clipped block holds its rail)."""
-    n = at + len(x)
-    for i in range(len(x)):
-        out[at + i] = x[i]
-    top = 0.0
-    nonfinite = zeros = 0
-    for i in range(n):
-        v = abs(np.float64(out[i]))
-        if not np.isfinite(v):
-            nonfinite += 1
-        elif v == 0.0:
-            zeros += 1
-        elif v > top:
-            top = v
-    near = 0
-    least = top * (1 - 1e-6)
-    for i in range(n):
-        v = abs(np.float64(out[i]))
-        if least <= v < np.inf:
-            near += 1
-    return top, nonfinite, zeros, near
 
 
 _RANK = {"clear": 0, "caution": 1, "stop": 2}

@@ -6,11 +6,11 @@ an echo's delay after the direct sound into the distance of the surface ahead
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from scipy.ndimage import maximum_filter1d
 
 from ..errors import VrechoError
 from ..signals import SPEED_OF_SOUND, analytic_envelope, analytic_filter
+from .kernels import echo_peaks
 from .ranging import GUARD, Envelope, at_rail
 
 
@@ -122,63 +122,9 @@ class EchoFinder:
             if rail >= 3:  # the direct sound clipped: its distortion rises above the sidelobes, near it
                 sidelobe = self._clipped_sidelobe(rail / m, code)
         peak_direct = float(max(span[0], span[1], env.envelope(d0 - 1, d0)[0]))
-        d, strength = _echoes(span, lo - d0, self.threshold, peak_direct, sidelobe, self._lobes, d0 - ref,
+        d, strength = echo_peaks(span, lo - d0, self.threshold, peak_direct, sidelobe, self._lobes, d0 - ref,
                               SPEED_OF_SOUND / self.fs, *self._mic, self.min_range_m, self.max_range_m)
         return list(zip(d.tolist(), strength.tolist()))
-
-
-@njit(cache=True, nogil=True)
-def _echoes(span, lo, threshold, peak_direct, sidelobe, lobes, offset, metres_per_sample, spacing, forward,
-            min_range_m, max_range_m):  # pragma: no cover (compiled)
-    """:meth:`EchoFinder.find`'s core, compiled (a pulse's few hundred lags in one pass instead of
-    a score of array calls): the envelope ``span`` from the direct sound on, the floor the median
-    of every 4th lag from ``lo`` (a quarter of the cost), the echoes its local maxima above
-    ``threshold`` times the floor and above the direct sound's sidelobes, less those that are a
-    stronger peak's own sidelobes (within reach of it and no stronger, relative to it, than the
-    codes' autocorrelation there, ``lobes``), each timed by a parabola through three lags.
-    Returns their distances (metres) and strengths (shares of ``peak_direct``)."""
-    n = len(span)
-    quarter = span[lo::4].astype(np.float64)
-    quarter.sort()
-    floor = threshold * (quarter[len(quarter) // 2] + 1e-12)
-    at = np.empty(n, np.int64)
-    count = 0
-    for i in range(lo + 1, n - 1):
-        v = span[i]
-        if v > floor and v > span[i - 1] and v >= span[i + 1] and v > peak_direct * sidelobe[i]:
-            at[count] = i
-            count += 1
-    reach = len(lobes)
-    d = np.empty(count)
-    strength = np.empty(count)
-    kept = 0
-    for a in range(count):
-        p = at[a]
-        v = np.float64(span[p])
-        lobe = False
-        b = a - 1
-        while b >= 0 and p - at[b] < reach and not lobe:
-            u = np.float64(span[at[b]])
-            lobe = v < u and v <= u * lobes[p - at[b]]
-            b -= 1
-        b = a + 1
-        while b < count and at[b] - p < reach and not lobe:
-            u = np.float64(span[at[b]])
-            lobe = v < u and v <= u * lobes[at[b] - p]
-            b += 1
-        if lobe:
-            continue
-        y0, y1, y2 = np.float64(span[p - 1]), v, np.float64(span[p + 1])
-        den = y0 - 2.0 * y1 + y2
-        x = p + 0.5 * (y0 - y2) / den if den < 0 else np.float64(p)
-        excess = metres_per_sample * (x + offset)
-        path = excess + spacing
-        dist = 0.5 * (forward + np.sqrt(max(forward * forward - spacing * spacing + path * path, 0.0)))
-        if excess > 0 and min_range_m <= dist <= max_range_m:
-            d[kept] = dist
-            strength[kept] = v / peak_direct
-            kept += 1
-    return d[:kept], strength[:kept]
 
 
 def mic_geometry(mic_offset_m) -> tuple[float, float]:

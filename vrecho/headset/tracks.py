@@ -14,7 +14,8 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
+
+from .kernels import closest_approach, lines, pair, passing
 
 
 _SIGMA_M = 0.01
@@ -76,123 +77,6 @@ def clutter_strength(echoes) -> float:
     (0.2, 0.0)
     """
     return sum(a for _, a in echoes) / len(echoes) if len(echoes) >= 4 else 0.0
-
-
-@njit(cache=True, nogil=True)
-def _solve(n, s1, s2, s3, s4, b0, b1, b2):  # pragma: no cover (compiled)
-    """Least squares of y on (u^2, u, 1) from its sums: (ok, p2, p1, p0, the normal matrix's
-    inverse), ok False when they do not determine a parabola."""
-    # The normal equations' matrix ((s4, s3, s2), (s3, s2, s1), (s2, s1, n)) is symmetric: its
-    # cofactors over its determinant are its inverse.
-    c00, c01, c02 = s2 * n - s1 * s1, -(s3 * n - s1 * s2), s3 * s1 - s2 * s2
-    c11, c12, c22 = s4 * n - s2 * s2, -(s4 * s1 - s3 * s2), s4 * s2 - s3 * s3
-    det = s4 * c00 + s3 * c01 + s2 * c02
-    inv = np.empty((3, 3))
-    if abs(det) < 1e-18:
-        return False, 0.0, 0.0, 0.0, inv
-    inv[0, 0], inv[0, 1], inv[0, 2] = c00 / det, c01 / det, c02 / det
-    inv[1, 0], inv[1, 1], inv[1, 2] = inv[0, 1], c11 / det, c12 / det
-    inv[2, 0], inv[2, 1], inv[2, 2] = inv[0, 2], inv[1, 2], c22 / det
-    return (True, inv[0, 0] * b2 + inv[0, 1] * b1 + inv[0, 2] * b0, inv[1, 0] * b2 + inv[1, 1] * b1 + inv[1, 2] * b0,
-            inv[2, 0] * b2 + inv[2, 1] * b1 + inv[2, 2] * b0, inv)
-
-
-@njit(cache=True, nogil=True)
-def _fit(us, ys, keep):  # pragma: no cover (compiled)
-    """Least squares of y on (u^2, u, 1) over the points ``keep`` says: (ok, p2, p1, p0, inverse,
-    the residuals' sum of squares, the residuals of all points)."""
-    s1 = s2 = s3 = s4 = b0 = b1 = b2 = 0.0
-    n = 0
-    for i in range(len(us)):
-        if keep[i]:
-            u, y = us[i], ys[i]
-            u2 = u * u
-            s1 += u
-            s2 += u2
-            s3 += u2 * u
-            s4 += u2 * u2
-            b0 += y
-            b1 += u * y
-            b2 += u2 * y
-            n += 1
-    ok, p2, p1, p0, inv = _solve(float(n), s1, s2, s3, s4, b0, b1, b2)
-    resid = ys - (p2 * us * us + p1 * us + p0)
-    rss = 0.0
-    for i in range(len(us)):
-        if keep[i]:
-            rss += resid[i] * resid[i]
-    return ok, p2, p1, p0, inv, rss, resid
-
-
-@njit(cache=True, nogil=True)
-def _passing(t, d, offsets, span_s):  # pragma: no cover (compiled)
-    """:meth:`Track.explained_by`'s test, compiled."""
-    first = np.searchsorted(t, t[-1] - span_s)
-    if len(t) - first < 8:
-        return False
-    t, d = t[first:], d[first:]
-    tc = t - t.mean()
-    tt = (tc * tc).mean()
-
-    def residual(x):  # mean square about its straight line in time
-        xc = x - x.mean()
-        return max((xc * xc).mean() - ((xc * tc).mean()) ** 2 / tt, 0.0)
-
-    frontal = residual(d)
-    nearest = d.min() - 0.02
-    for a in offsets:
-        if a < nearest and residual(np.sqrt(d * d - a * a)) < 0.49 * frontal:  # rms below 0.7 of it
-            return True
-    return False
-
-
-@njit(cache=True, nogil=True)
-def _closest_approach(times, dists, spans, miss_m):  # pragma: no cover (compiled)
-    """:meth:`Track.in_the_way`'s fits, compiled: 1 in the way, 0 not, -1 cannot tell."""
-    t_last = times[-1]
-    for span_s in spans:
-        first = len(times)
-        while first > 0 and times[first - 1] >= t_last - span_s:
-            first -= 1
-        n = len(times) - first
-        if n < 8 or t_last - times[first] < 0.9 * span_s:
-            continue
-        us = times[first:][::-1] - t_last  # (newest first)
-        d = dists[first:][::-1]
-        ys = d * d
-        keep = np.ones(n, np.bool_)
-        ok, p2, p1, p0, inv, rss, resid = _fit(us, ys, keep)
-        if not ok:
-            continue
-        # An echo of another surface taken where two crossed in range strays from the others:
-        # when the fit's residual says one may (over 4 mm rms, a residual of d^2 being some 2 d
-        # times one of d), refit without the points beyond four times the residuals' median
-        # spread (and 5 mm).
-        if rss > 6.4e-5 * ys.sum():
-            spread = 4.0 * 1.4826 * np.sort(np.abs(resid))[n // 2]
-            for i in range(n):
-                keep[i] = abs(resid[i]) <= max(spread, 0.01 * d[i])
-            kept = keep.sum()
-            if 8 <= kept < n:
-                ok, p2, p1, p0, inv, rss, resid = _fit(us, ys, keep)
-                if not ok:
-                    continue
-                n = kept
-        if p2 <= 1e-3:  # not nearing at a steady pace (starting, stopping): cannot tell yet
-            continue
-        g0, g1 = p1 ** 2 / (4 * p2 ** 2), -p1 / (2 * p2)
-        var = 0.0
-        for r, gr in enumerate((g0, g1, 1.0)):
-            for c, gc in enumerate((g0, g1, 1.0)):
-                var += gr * inv[r, c] * gc
-        var *= rss / max(n - 3, 1)
-        a2 = p0 - p1 ** 2 / (4 * p2)
-        sigma = max(var, 0.0) ** 0.5
-        if -miss_m ** 2 < a2 - 2 * sigma and a2 + 2 * sigma < miss_m ** 2:  # far below 0 is a misfit
-            return 1
-        if a2 - 2 * sigma > miss_m ** 2:
-            return 0
-    return -1
 
 
 @dataclass(slots=True)
@@ -371,8 +255,28 @@ class Track:
         if not offsets:
             return False
         times, dists = self._history(extra)
-        return _passing(np.fromiter(times, float, len(times)), np.fromiter(dists, float, len(dists)),
+        return passing(np.fromiter(times, float, len(times)), np.fromiter(dists, float, len(dists)),
                         np.asarray(offsets, float), float(span_s))
+
+    def straight(self, n: int) -> float:
+        """How far the last ``n`` echoes stray from a straight line in time: their rms residual
+        about it, in metres (a surface's, walked at a steady pace: millimetres).
+
+        Parameters
+        ----------
+        n : int
+            How many of the last echoes (at least 3; all there are if fewer).
+
+        Returns
+        -------
+        float
+        """
+        k = min(n, len(self.times))
+        t = np.fromiter(self.times, float, len(self.times))[-k:]
+        d = np.fromiter(self.dists, float, len(self.dists))[-k:]
+        t = t - t.mean()
+        slope = (t @ (d - d.mean())) / max(t @ t, 1e-12)
+        return float(np.sqrt(np.mean((d - d.mean() - slope * t) ** 2)))
 
     def ahead_with(self, t: float, d: float, miss_m: float, still: list[float]) -> bool:
         """Whether the surface is in the way with one more echo, the history left as it is.
@@ -446,7 +350,7 @@ class Track:
         times, dists = self._history(extra)
         t = np.fromiter(times, float, len(times))
         d = np.fromiter(dists, float, len(dists))
-        way = _closest_approach(t, d, np.asarray(spans_s, float), float(miss_m))
+        way = closest_approach(t, d, np.asarray(spans_s, float), float(miss_m))
         return None if way < 0 else bool(way)
 
 
@@ -487,81 +391,17 @@ def initiate(pulses, *, tolerance_m: float = 0.006, approach_mps: float = 2.6, r
     if not (e0 and e1 and e2) or not t2 < t1 < t0:
         return []
     d0, d1, d2 = (np.fromiter((d for d, _ in e), float, len(e)) for e in (e0, e1, e2))
-    lines = _lines(d0, d1, d2, (t1 - t2) / (t0 - t2), -approach_mps * (t0 - t2), recede_mps * (t0 - t2), tolerance_m)
+    found = lines(d0, d1, d2, (t1 - t2) / (t0 - t2), -approach_mps * (t0 - t2), recede_mps * (t0 - t2), tolerance_m)
     out = []
-    for a, b, c in lines:
+    for a, b, c in found:
         tr = Track()
         for t, (d, strength), clutter, mean in ((t2, e2[c], c2, s2), (t1, e1[b], c1, s1), (t0, e0[a], c0, s0)):
             tr.update(t, d, strength, clutter_per_m=clutter, clutter_strength=mean)
         out.append(tr)
-    for e, used in ((e0, {a for a, _, _ in lines}), (e1, {b for _, b, _ in lines}), (e2, {c for _, _, c in lines})):
+    for e, used in ((e0, {a for a, _, _ in found}), (e1, {b for _, b, _ in found}), (e2, {c for _, _, c in found})):
         if used:
             e[:] = [x for i, x in enumerate(e) if i not in used]
     return out
-
-
-@njit(cache=True, nogil=True)
-def _lines(d0, d1, d2, middle_at, least, most, tolerance_m):  # pragma: no cover (compiled)
-    """:func:`initiate`'s search, compiled: (i0, i1, i2) of the echoes (newest, middle, oldest
-    pulse; distances sorted) that lie in a line, the middle one within ``tolerance_m`` of where
-    the other two put it (``middle_at`` of the way from the oldest), the newest ``least`` to
-    ``most`` metres from the oldest; the nearest to a line first, each older echo in one line
-    at most, the newest in two."""
-    found, misses = [], []
-    for a in range(len(d0)):
-        for c in range(len(d2)):
-            step = d0[a] - d2[c]
-            if step < least or step > most:
-                continue
-            middle = d2[c] + step * middle_at
-            b = np.searchsorted(d1, middle)
-            if b == len(d1) or (b > 0 and abs(d1[b - 1] - middle) < abs(d1[b] - middle)):
-                b -= 1
-            miss = abs(d1[b] - middle)
-            if miss < tolerance_m:
-                found.append((a, b, c))
-                misses.append(miss)
-    out = []
-    if not found:
-        return out
-    used0 = np.zeros(len(d0), np.int64)
-    used1 = np.zeros(len(d1), np.bool_)
-    used2 = np.zeros(len(d2), np.bool_)
-    for k in np.argsort(np.array(misses), kind="mergesort"):
-        a, b, c = found[k]
-        if used0[a] >= 2 or used1[b] or used2[c]:
-            continue
-        used0[a] += 1
-        used1[b] = True
-        used2[c] = True
-        out.append((a, b, c))
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _assign(d, strength, predicted, gates, mean):  # pragma: no cover (compiled)
-    """:func:`associate`'s pairing, compiled: for each echo, the track it joins (-1: none), the
-    likeliest pairs within the gates first (the score's terms, :meth:`Track.update`)."""
-    js, iis, costs = [], [], []
-    for j in range(len(d)):
-        llr = 0.0
-        if mean > 0.0:
-            x = strength[j] / mean - 1.0
-            llr = -1.0 if x < -1.0 else 3.0 if x > 3.0 else x  # (amplitude_llr)
-        for i in range(len(predicted)):
-            gap = abs(d[j] - predicted[i])
-            if gap < gates[i]:
-                js.append(j)
-                iis.append(i)
-                costs.append(0.5 * (gap / _SIGMA_M) ** 2 - llr)
-    track_of = np.full(len(d), -1, np.int64)
-    taken = np.zeros(len(predicted), np.bool_)
-    for k in np.argsort(np.array(costs), kind="mergesort"):
-        j, i = js[k], iis[k]
-        if track_of[j] < 0 and not taken[i]:
-            track_of[j] = i
-            taken[i] = True
-    return track_of
 
 
 def associate(tracks: list, t: float, echoes) -> list[tuple[Track | None, float, float]]:
@@ -592,7 +432,7 @@ def associate(tracks: list, t: float, echoes) -> list[tuple[Track | None, float,
         predicted = np.array([tr.d_hat + (tr.speed or 0.0) * (t - tr.times[-1]) for tr in tracks])
         gates = np.array([tr.gate_m for tr in tracks])
         d, strength = np.array(echoes).T.copy()  # (contiguous, as the compiled kernel was made for)
-        for j, i in enumerate(_assign(d, strength, predicted, gates, clutter_strength(echoes)).tolist()):
+        for j, i in enumerate(pair(d, strength, predicted, gates, clutter_strength(echoes), _SIGMA_M).tolist()):
             if i >= 0:
                 track_of[j] = i
     out = [(tracks[i], echoes[j][0], echoes[j][1]) for j, i in track_of.items()]

@@ -1,0 +1,407 @@
+"""The headset call's per-pulse work, compiled (numba, cached on disk): the block's read
+(:func:`take`), a pulse's echoes in its envelope (:func:`echo_peaks`), their pairing with the
+tracks (:func:`pair`), the lines that start tracks (:func:`lines`), and the tracks' fits
+(:func:`closest_approach`, :func:`passing`). Plain loops over a few hundred lags or a few dozen
+echoes, where a score of array calls cost more than the work; :mod:`.boundary`, :mod:`.echoes`
+and :mod:`.tracks` call them and say what each means. :func:`compile_kernels` makes them (or
+loads them from numba's cache) before any audio callback needs them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+_COMPILED = False
+
+
+def compile_kernels() -> None:
+    """Compile the monitor's compiled kernels (numba), or load them from numba's cache, once per
+    process: the audio callback must never wait for a compiler. Some 8 s the first time after an
+    install (``install.sh`` does it), 0.2 s after; :class:`~vrecho.headset.BoundaryMonitor` calls it."""
+    global _COMPILED
+    if _COMPILED:
+        return
+    out = np.zeros(8, np.float32)
+    for x in (np.zeros(8), np.zeros(8, np.float32), np.zeros((8, 2))[:, 0], np.zeros((8, 2), np.float32)[:, 0]):
+        take(x, out, 0)  # (sounddevice's blocks: float32 or float64, channel 0 of several or one)
+    echo_peaks(np.ones(16, np.float32), 2, 3.5, 1.0, np.zeros(16), np.ones(2), 0.0, 0.007, 0.07, 0.0, 0.12, 4.0)
+    closest_approach(np.arange(10.0), np.ones(10), np.array([0.6, 0.45]), 0.4)
+    passing(np.arange(10.0), np.ones(10), np.array([0.5]), 0.6)
+    pair(np.ones(2), np.ones(2), np.ones(1), np.ones(1), 1.0, 0.01)
+    lines(np.ones(1), np.ones(1), np.ones(1), 0.5, -0.1, 0.1, 0.006)
+    _COMPILED = True
+
+
+@njit(cache=True, nogil=True)
+def take(x, out, at):  # pragma: no cover (compiled)
+    """Write the samples ``x`` into ``out`` from ``at`` on as float32 (beyond its range: infinite,
+    without a warning), and read all of ``out[:at + len(x)]`` in one pass.
+
+    Parameters
+    ----------
+    x : numpy.ndarray [shape=(n,)]
+        A block's samples, float32 or float64 (a channel of several: any stride).
+    out : numpy.ndarray [shape=(>= at + n,), dtype=float32]
+        Where they go.
+    at : int
+        Where in ``out`` they start (samples gathered before them lie before).
+
+    Returns
+    -------
+    top : float
+        The largest finite magnitude of ``out[:at + n]``.
+    nonfinite, zeros, near : int
+        How many of its samples are not finite, exactly 0, and within 1e-6 of ``top`` (a clipped
+        block holds its rail).
+    """
+    n = at + len(x)
+    for i in range(len(x)):
+        out[at + i] = x[i]
+    top = 0.0
+    nonfinite = zeros = 0
+    for i in range(n):
+        v = abs(np.float64(out[i]))
+        if not np.isfinite(v):
+            nonfinite += 1
+        elif v == 0.0:
+            zeros += 1
+        elif v > top:
+            top = v
+    near = 0
+    least = top * (1 - 1e-6)
+    for i in range(n):
+        v = abs(np.float64(out[i]))
+        if least <= v < np.inf:
+            near += 1
+    return top, nonfinite, zeros, near
+
+
+@njit(cache=True, nogil=True)
+def echo_peaks(span, lo, threshold, peak_direct, sidelobe, lobes, offset, metres_per_sample, spacing, forward,
+            min_range_m, max_range_m):  # pragma: no cover (compiled)
+    """:meth:`EchoFinder.find <vrecho.headset.echoes.EchoFinder.find>`'s core: a pulse's echoes in its
+    envelope, in one pass over its few hundred lags.
+
+    The floor is the median of every 4th lag from ``lo``; an echo is a local maximum above
+    ``threshold`` times it and above the direct sound's sidelobes, and not a stronger peak's own
+    sidelobe (within reach of it and no stronger, relative to it, than the codes'
+    autocorrelation there); each is timed by a parabola through three lags.
+
+    Parameters
+    ----------
+    span : numpy.ndarray [shape=(n,), dtype=float32]
+        The envelope from the direct sound's lag on.
+    lo : int
+        The first lag looked at (the nearest range), in samples after the direct sound.
+    threshold : float
+        How far above the floor an echo rises (a factor).
+    peak_direct : float
+        The direct sound's envelope peak.
+    sidelobe : numpy.ndarray [shape=(>= n,)]
+        The direct sound's sidelobes by lag, a share of its peak.
+    lobes : numpy.ndarray [shape=(reach,)]
+        An echo's own sidelobes by lag, a share of its peak (``lobes[0]`` = 1).
+    offset : float
+        The direct sound's arrival less its lag 0, in samples.
+    metres_per_sample : float
+        The speed of sound over the sample rate.
+    spacing, forward : float
+        Loudspeaker to microphone, and its part along the wearer's way, in metres.
+    min_range_m, max_range_m : float
+        The distances kept.
+
+    Returns
+    -------
+    d, strength : numpy.ndarray [shape=(k,)]
+        Each echo's distance in metres and its peak as a share of ``peak_direct``.
+    """
+    n = len(span)
+    quarter = span[lo::4].astype(np.float64)
+    quarter.sort()
+    floor = threshold * (quarter[len(quarter) // 2] + 1e-12)
+    at = np.empty(n, np.int64)
+    count = 0
+    for i in range(lo + 1, n - 1):
+        v = span[i]
+        if v > floor and v > span[i - 1] and v >= span[i + 1] and v > peak_direct * sidelobe[i]:
+            at[count] = i
+            count += 1
+    reach = len(lobes)
+    d = np.empty(count)
+    strength = np.empty(count)
+    kept = 0
+    for a in range(count):
+        p = at[a]
+        v = np.float64(span[p])
+        lobe = False
+        b = a - 1
+        while b >= 0 and p - at[b] < reach and not lobe:
+            u = np.float64(span[at[b]])
+            lobe = v < u and v <= u * lobes[p - at[b]]
+            b -= 1
+        b = a + 1
+        while b < count and at[b] - p < reach and not lobe:
+            u = np.float64(span[at[b]])
+            lobe = v < u and v <= u * lobes[at[b] - p]
+            b += 1
+        if lobe:
+            continue
+        y0, y1, y2 = np.float64(span[p - 1]), v, np.float64(span[p + 1])
+        den = y0 - 2.0 * y1 + y2
+        x = p + 0.5 * (y0 - y2) / den if den < 0 else np.float64(p)
+        excess = metres_per_sample * (x + offset)
+        path = excess + spacing
+        dist = 0.5 * (forward + np.sqrt(max(forward * forward - spacing * spacing + path * path, 0.0)))
+        if excess > 0 and min_range_m <= dist <= max_range_m:
+            d[kept] = dist
+            strength[kept] = v / peak_direct
+            kept += 1
+    return d[:kept], strength[:kept]
+
+
+@njit(cache=True, nogil=True)
+def _solve(n, s1, s2, s3, s4, b0, b1, b2):  # pragma: no cover (compiled)
+    """Least squares of y on (u^2, u, 1) from its sums: (ok, p2, p1, p0, the normal matrix's
+    inverse), ok False when they do not determine a parabola."""
+    # The normal equations' matrix ((s4, s3, s2), (s3, s2, s1), (s2, s1, n)) is symmetric: its
+    # cofactors over its determinant are its inverse.
+    c00, c01, c02 = s2 * n - s1 * s1, -(s3 * n - s1 * s2), s3 * s1 - s2 * s2
+    c11, c12, c22 = s4 * n - s2 * s2, -(s4 * s1 - s3 * s2), s4 * s2 - s3 * s3
+    det = s4 * c00 + s3 * c01 + s2 * c02
+    inv = np.empty((3, 3))
+    if abs(det) < 1e-18:
+        return False, 0.0, 0.0, 0.0, inv
+    inv[0, 0], inv[0, 1], inv[0, 2] = c00 / det, c01 / det, c02 / det
+    inv[1, 0], inv[1, 1], inv[1, 2] = inv[0, 1], c11 / det, c12 / det
+    inv[2, 0], inv[2, 1], inv[2, 2] = inv[0, 2], inv[1, 2], c22 / det
+    return (True, inv[0, 0] * b2 + inv[0, 1] * b1 + inv[0, 2] * b0, inv[1, 0] * b2 + inv[1, 1] * b1 + inv[1, 2] * b0,
+            inv[2, 0] * b2 + inv[2, 1] * b1 + inv[2, 2] * b0, inv)
+
+
+@njit(cache=True, nogil=True)
+def _fit(us, ys, keep):  # pragma: no cover (compiled)
+    """Least squares of y on (u^2, u, 1) over the points ``keep`` says: (ok, p2, p1, p0, inverse,
+    the residuals' sum of squares, the residuals of all points)."""
+    s1 = s2 = s3 = s4 = b0 = b1 = b2 = 0.0
+    n = 0
+    for i in range(len(us)):
+        if keep[i]:
+            u, y = us[i], ys[i]
+            u2 = u * u
+            s1 += u
+            s2 += u2
+            s3 += u2 * u
+            s4 += u2 * u2
+            b0 += y
+            b1 += u * y
+            b2 += u2 * y
+            n += 1
+    ok, p2, p1, p0, inv = _solve(float(n), s1, s2, s3, s4, b0, b1, b2)
+    resid = ys - (p2 * us * us + p1 * us + p0)
+    rss = 0.0
+    for i in range(len(us)):
+        if keep[i]:
+            rss += resid[i] * resid[i]
+    return ok, p2, p1, p0, inv, rss, resid
+
+
+@njit(cache=True, nogil=True)
+def passing(t, d, offsets, span_s):  # pragma: no cover (compiled)
+    """:meth:`Track.explained_by <vrecho.headset.tracks.Track.explained_by>`'s test: whether some
+    offset's sqrt(d^2 - a^2) falls along a straight line in time with an rms residual under 0.7
+    of that of d itself, over the last ``span_s``.
+
+    Parameters
+    ----------
+    t, d : numpy.ndarray [shape=(n,)]
+        The track's times (seconds, rising) and distances (metres).
+    offsets : numpy.ndarray [shape=(k,)]
+        Distances of surfaces that stay put, metres (those 2 cm nearer than the nearest echo tried).
+    span_s : float
+        The stretch fitted, in seconds (fewer than 8 echoes in it: False).
+
+    Returns
+    -------
+    bool
+    """
+    first = np.searchsorted(t, t[-1] - span_s)
+    if len(t) - first < 8:
+        return False
+    t, d = t[first:], d[first:]
+    tc = t - t.mean()
+    tt = (tc * tc).mean()
+
+    def residual(x):  # mean square about its straight line in time
+        xc = x - x.mean()
+        return max((xc * xc).mean() - ((xc * tc).mean()) ** 2 / tt, 0.0)
+
+    frontal = residual(d)
+    nearest = d.min() - 0.02
+    for a in offsets:
+        if a < nearest and residual(np.sqrt(d * d - a * a)) < 0.49 * frontal:  # rms below 0.7 of it
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def closest_approach(times, dists, spans, miss_m):  # pragma: no cover (compiled)
+    """:meth:`Track.in_the_way <vrecho.headset.tracks.Track.in_the_way>`'s fits: d^2 as a
+    quadratic in time over each span, its minimum a^2 against ``miss_m``^2 by two standard errors.
+
+    Parameters
+    ----------
+    times, dists : numpy.ndarray [shape=(n,)]
+        The track's times (seconds, rising) and distances (metres).
+    spans : numpy.ndarray [shape=(k,)]
+        The stretches of history tried in order, in seconds.
+    miss_m : float
+        The closest approach beyond which a surface is not in the way, in metres.
+
+    Returns
+    -------
+    int
+        1 in the way, 0 not, -1 cannot tell.
+    """
+    t_last = times[-1]
+    for span_s in spans:
+        first = len(times)
+        while first > 0 and times[first - 1] >= t_last - span_s:
+            first -= 1
+        n = len(times) - first
+        if n < 8 or t_last - times[first] < 0.9 * span_s:
+            continue
+        us = times[first:][::-1] - t_last  # (newest first)
+        d = dists[first:][::-1]
+        ys = d * d
+        keep = np.ones(n, np.bool_)
+        ok, p2, p1, p0, inv, rss, resid = _fit(us, ys, keep)
+        if not ok:
+            continue
+        # An echo of another surface taken where two crossed in range strays from the others:
+        # when the fit's residual says one may (over 4 mm rms, a residual of d^2 being some 2 d
+        # times one of d), refit without the points beyond four times the residuals' median
+        # spread (and 5 mm).
+        if rss > 6.4e-5 * ys.sum():
+            spread = 4.0 * 1.4826 * np.sort(np.abs(resid))[n // 2]
+            for i in range(n):
+                keep[i] = abs(resid[i]) <= max(spread, 0.01 * d[i])
+            kept = keep.sum()
+            if 8 <= kept < n:
+                ok, p2, p1, p0, inv, rss, resid = _fit(us, ys, keep)
+                if not ok:
+                    continue
+                n = kept
+        if p2 <= 1e-3:  # not nearing at a steady pace (starting, stopping): cannot tell yet
+            continue
+        g0, g1 = p1 ** 2 / (4 * p2 ** 2), -p1 / (2 * p2)
+        var = 0.0
+        for r, gr in enumerate((g0, g1, 1.0)):
+            for c, gc in enumerate((g0, g1, 1.0)):
+                var += gr * inv[r, c] * gc
+        var *= rss / max(n - 3, 1)
+        a2 = p0 - p1 ** 2 / (4 * p2)
+        sigma = max(var, 0.0) ** 0.5
+        if -miss_m ** 2 < a2 - 2 * sigma and a2 + 2 * sigma < miss_m ** 2:  # far below 0 is a misfit
+            return 1
+        if a2 - 2 * sigma > miss_m ** 2:
+            return 0
+    return -1
+
+
+@njit(cache=True, nogil=True)
+def lines(d0, d1, d2, middle_at, least, most, tolerance_m):  # pragma: no cover (compiled)
+    """:func:`~vrecho.headset.tracks.initiate`'s search: echoes of three pulses in a line.
+
+    Parameters
+    ----------
+    d0, d1, d2 : numpy.ndarray
+        The newest, middle and oldest pulse's echo distances, metres, sorted.
+    middle_at : float
+        How far along from the oldest pulse to the newest the middle one was, 0 to 1.
+    least, most : float
+        The newest echo's distance less the oldest's, at least and at most, metres.
+    tolerance_m : float
+        How far the middle echo may lie from where the other two put it, metres.
+
+    Returns
+    -------
+    list of (int, int, int)
+        The lines' echo indices (newest, middle, oldest), the nearest to a line first; each older
+        echo in one line at most, the newest in two.
+    """
+    found, misses = [], []
+    for a in range(len(d0)):
+        for c in range(len(d2)):
+            step = d0[a] - d2[c]
+            if step < least or step > most:
+                continue
+            middle = d2[c] + step * middle_at
+            b = np.searchsorted(d1, middle)
+            if b == len(d1) or (b > 0 and abs(d1[b - 1] - middle) < abs(d1[b] - middle)):
+                b -= 1
+            miss = abs(d1[b] - middle)
+            if miss < tolerance_m:
+                found.append((a, b, c))
+                misses.append(miss)
+    out = []
+    if not found:
+        return out
+    used0 = np.zeros(len(d0), np.int64)
+    used1 = np.zeros(len(d1), np.bool_)
+    used2 = np.zeros(len(d2), np.bool_)
+    for k in np.argsort(np.array(misses), kind="mergesort"):
+        a, b, c = found[k]
+        if used0[a] >= 2 or used1[b] or used2[c]:
+            continue
+        used0[a] += 1
+        used1[b] = True
+        used2[c] = True
+        out.append((a, b, c))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def pair(d, strength, predicted, gates, mean, sigma_m):  # pragma: no cover (compiled)
+    """:func:`~vrecho.headset.tracks.associate`'s pairing: the likeliest pairs of echo and track
+    within the tracks' gates first (the score's terms, :meth:`~vrecho.headset.tracks.Track.update`:
+    nearness to the prediction, strength against the pulse's mean).
+
+    Parameters
+    ----------
+    d, strength : numpy.ndarray [shape=(n,)]
+        The echoes' distances (metres) and strengths.
+    predicted, gates : numpy.ndarray [shape=(k,)]
+        The tracks' predicted distances and gates, metres.
+    mean : float
+        The pulse's peaks' mean strength (0: not weighed).
+    sigma_m : float
+        How far a surface's echo strays from its prediction, metres.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(n,), dtype=int64]
+        For each echo, the track it joins (-1: none).
+    """
+    js, iis, costs = [], [], []
+    for j in range(len(d)):
+        llr = 0.0
+        if mean > 0.0:
+            x = strength[j] / mean - 1.0
+            llr = -1.0 if x < -1.0 else 3.0 if x > 3.0 else x  # (amplitude_llr)
+        for i in range(len(predicted)):
+            gap = abs(d[j] - predicted[i])
+            if gap < gates[i]:
+                js.append(j)
+                iis.append(i)
+                costs.append(0.5 * (gap / sigma_m) ** 2 - llr)
+    track_of = np.full(len(d), -1, np.int64)
+    taken = np.zeros(len(predicted), np.bool_)
+    for k in np.argsort(np.array(costs), kind="mergesort"):
+        j, i = js[k], iis[k]
+        if track_of[j] < 0 and not taken[i]:
+            track_of[j] = i
+            taken[i] = True
+    return track_of
+
+
