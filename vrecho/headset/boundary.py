@@ -204,6 +204,7 @@ class BoundaryMonitor:
         self._env = Envelope(probes, size)
         self._now = 0  # samples processed so far (the microphone's clock)
         self._written = 0  # samples written to the loudspeaker (= received from the microphone, staged ones too)
+        self._played = 0  # the first pulse not yet wholly written to the loudspeaker (ProbeSchedule.fill)
         self._staged = 0  # samples received but not yet processed (small blocks, gathered in _stage)
         self._clipped_at = -(1 << 40)  # the sample at which a block last came clipped
         self._alerted = None  # the verdict the last alert told, when that alert had no flags of its own
@@ -269,6 +270,15 @@ class BoundaryMonitor:
         VrechoError
             For ``frames`` other than the blocks' length, or blocks :meth:`process` refuses.
         """
+        if (type(indata) is np.ndarray and type(outdata) is np.ndarray and indata.ndim == 2 == outdata.ndim
+                and indata.dtype.char == "f" == outdata.dtype.char and type(frames) is int
+                and frames == len(indata) == len(outdata) and indata.shape[1] and outdata.shape[1]
+                and outdata.flags.writeable):  # (sounddevice's float32 blocks: no more to check)
+            if status:
+                self._lock.suspect()
+            self._played = self.schedule.fill(self._written, outdata, self._played)
+            self._read(indata[:, 0])
+            return
         length = np.shape(indata)[0] if np.ndim(indata) else None
         if isinstance(frames, bool) or not isinstance(frames, (int, np.integer)) or frames != length:
             raise VrechoError(f"frames: expected the microphone block's length, {length}, got {frames!r}")
@@ -313,19 +323,27 @@ class BoundaryMonitor:
                 raise VrechoError(f"speaker: expected {n} frames like the microphone block, got {len(speaker)}")
             if not speaker.flags.writeable:
                 raise VrechoError("speaker: the block is read-only; the monitor writes its probe into it")
-            block = self.speaker_block(n)
-            if speaker.dtype.kind != "f":  # PCM: the probe (peak under 1) scaled to the integers' full scale
+            if speaker.dtype.kind == "f":
+                self._played = self.schedule.fill(self._written, speaker, self._played)
+            else:  # PCM: the probe (peak under 1) scaled to the integers' full scale
                 offset, scale = pcm_scale(speaker.dtype)
                 info = np.iinfo(speaker.dtype)
-                block = np.clip(np.round(offset + scale * block), info.min, info.max)
-            speaker[...] = block[:, None] if speaker.ndim == 2 else block
+                block = np.clip(np.round(offset + scale * self.speaker_block(n)), info.min, info.max)
+                speaker[...] = block[:, None] if speaker.ndim == 2 else block
         if x.dtype.kind != "f":
             offset, scale = pcm_scale(x.dtype)
             x = (x.astype(np.float32) - offset) / scale
+        return self._read(x)
+
+    def _read(self, x: np.ndarray) -> Alert:
+        """Listen to one microphone block of floats (:meth:`process` after its checks)."""
+        n, staged = len(x), self._staged
         self._written += n
-        staged = self._staged
         if staged + n < _STAGE:  # small blocks wait for a few milliseconds' worth (the work is per block)
-            take(x, self._stage, staged)
+            if x.dtype.char == "f":
+                self._stage[staged:staged + n] = x
+            else:  # (float64: beyond float32's range, infinite without a warning)
+                take(x, self._stage, staged)
             self._staged += n
             return self._alert
         if len(self._block) < staged + n:
@@ -675,9 +693,8 @@ class BoundaryMonitor:
 _RANK = {"clear": 0, "caution": 1, "stop": 2}
 _TRUE = np.ones(8192, bool)  # every sample sound: the usual block's mask, never written to
 _LOOMING = 12.0
-"""The track score (its echoes' log-likelihood ratio against stray peaks) from which a surface
-nearing fast and close cautions before the fit says it is in the way."""
+"""The track score (its echoes' log-likelihood ratio against stray peaks) from which a surface nearing
+fast and close cautions before the fit says it is in the way."""
 _STAGE = 441
-"""Blocks of fewer samples than this are gathered until they make that many (10 ms at 44.1 kHz:
-the work done per block, checking it and looking for what is due, costs the same for 16
-samples as for 480)."""
+"""Blocks of fewer samples are gathered until they make that many (10 ms at 44.1 kHz: the work
+done per block costs the same for 16 samples as for 480)."""

@@ -235,14 +235,40 @@ class ProbeSchedule:
         numpy.ndarray [shape=(n,), dtype=float64]
         """
         out = np.zeros(n)
-        m = self.length
-        k = self.first_at_or_after(max(start - m + 1, 0))
-        while (e := self.emission(k)) < start + n:
-            lo, hi = max(e, start), min(e + m, start + n)
-            if hi > lo:
-                out[lo - start:hi - start] = self.probe(k)[lo - e:hi - e]
-            k += 1
+        self.fill(start, out)
         return out
+
+    def fill(self, start: int, out: np.ndarray, k: int = 0) -> int:
+        """Write the loudspeaker's samples from ``start`` on into ``out`` in place, every channel
+        the same (an audio callback's output block, no new array).
+
+        Parameters
+        ----------
+        start : int
+            The block's first sample.
+        out : numpy.ndarray [shape=(n,) or (n, channels)], float
+            The block.
+        k : int
+            The first pulse that may still sound there (what the last call returned; looked up
+            afresh when it has ended before ``start``).
+
+        Returns
+        -------
+        int
+            The first pulse that may sound after this block: ``k`` for the next call.
+        """
+        out.fill(0.0)
+        m, end = self.length, start + len(out)
+        if self.emission(k) + m <= start:
+            k = self.first_at_or_after(max(start - m + 1, 0))
+        while (e := self.emission(k)) < end:
+            lo, hi = max(e, start), min(e + m, end)
+            seg = self.probes[self._pulse(k)[1]][lo - e:hi - e]
+            out[lo - start:hi - start] = seg[:, None] if out.ndim == 2 else seg
+            if e + m > end:
+                break
+            k += 1
+        return k
 
 
 class Envelope:

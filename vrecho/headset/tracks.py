@@ -259,13 +259,16 @@ class Track:
                         np.asarray(offsets, float), float(span_s))
 
     def straight(self, n: int) -> float:
-        """How far the last ``n`` echoes stray from a straight line in time: their rms residual
-        about it, in metres (a surface's, walked at a steady pace: millimetres).
+        """How far the last ``n`` echoes stray from a straight line in time: the median absolute
+        residual about the line of their median pairwise slope (Theil-Sen), in metres. A
+        surface's echoes, walked toward at a steady pace: a millimetre or so, whatever one pulse
+        timed off after the round trip stepped; a still surface's track that took a line of
+        stray peaks: centimetres, where it bends.
 
         Parameters
         ----------
         n : int
-            How many of the last echoes (at least 3; all there are if fewer).
+            How many of the last echoes (all there are if fewer; at least 2).
 
         Returns
         -------
@@ -274,9 +277,9 @@ class Track:
         k = min(n, len(self.times))
         t = np.fromiter(self.times, float, len(self.times))[-k:]
         d = np.fromiter(self.dists, float, len(self.dists))[-k:]
-        t = t - t.mean()
-        slope = (t @ (d - d.mean())) / max(t @ t, 1e-12)
-        return float(np.sqrt(np.mean((d - d.mean() - slope * t) ** 2)))
+        i, j = np.triu_indices(k, 1)
+        r = d - np.median((d[j] - d[i]) / np.maximum(t[j] - t[i], 1e-6)) * t
+        return float(np.median(np.abs(r - np.median(r))))
 
     def ahead_with(self, t: float, d: float, miss_m: float, still: list[float]) -> bool:
         """Whether the surface is in the way with one more echo, the history left as it is.
