@@ -643,7 +643,7 @@ class BoundaryMonitor:
         # door), closes at a fifth of it: its time to contact tells whether it is in the way
         # soon, not its distance.
         pace = max((abs(tr.speed) for tr in self._tracks if tr.speed is not None and tr.confirmed and len(tr.times) >= 8
-                    and t_now - tr.times[-1] < 0.3), default=0.0)
+                    and t_pulse - tr.times[-1] < 0.4), default=0.0)  # (pulse times: the round trip ago)
         self._pace = pace = max(pace, self._pace - (t_now - self._paced_at))  # (forgotten at 1 m/s a second)
         self._paced_at = t_now
         for tr in self._tracks:
