@@ -146,7 +146,7 @@ class RoundTrip:
         sample = rows[:, ::7]  # (every 7th cell: the median at a fraction of the cost)
         sample = sample[sample > 0]
         floor = float(np.median(sample)) if len(sample) else 0.0
-        if top <= 0 or top < 10.0 * float(np.median(score[testable])) or top < 20.0 * floor:
+        if top <= 0 or top < 10.0 * float(np.median(score[testable])) or top < 10.0 * floor:
             return False
         j = int(np.argmax(score >= 0.3 * top))  # the earliest strong one: the direct sound, before its echoes
         while j + 1 < span and score[j + 1] > score[j]:
