@@ -352,3 +352,44 @@ def test_a_side_wall_converged_on_through_a_door_is_not_ahead():
                          stop_m=0.0)
     _, alerts, _ = _run(walk)
     assert all(a.level == "clear" for a in alerts)
+
+
+def _among_pings(own: float, ping: float, n_pings: int, seconds: float, seed: int) -> np.ndarray:
+    """A stream of the monitor's own pulses (peak ``own``, 5000 samples round trip; 0: muted) among
+    ``n_pings`` other headsets' pings (either code, peak up to ``ping``) at random times."""
+    rng = np.random.default_rng(seed)
+    sch = _monitor().schedule
+    n = int(seconds * FS)
+    x = 1e-4 * rng.standard_normal(n)
+    for k in range(int(seconds / 0.04)):
+        e = sch.emission(k) + 5000
+        if own and e + sch.length < n:
+            x[e:e + sch.length] += own * sch.probe(k)
+    for _ in range(n_pings):
+        e = int(rng.integers(0, n - sch.length))
+        x[e:e + sch.length] += ping * rng.uniform(0.3, 1.0) * sch.probes[int(rng.integers(2))]
+    return x
+
+
+def test_the_round_trip_is_found_among_many_pings_and_never_without_its_own():
+    # Other headsets' pings, 600 a second (two or three of them with their reverberation), each up
+    # to half as loud as the monitor's own direct sound (its loudspeaker turned away from its
+    # microphone): the own pulses are still found within half a second (the search wanted them 20
+    # times the stream's median envelope, and did not lock). Muted, the same pings never lock it.
+    for seed in range(3):
+        _, alerts, ends = _run_stream(_among_pings(0.1, 0.05, 1200, 2.0, seed))
+        locked = [e for a, e in zip(alerts, ends) if a.latency_s is not None]
+        assert locked and locked[0] / FS < 0.5
+        assert abs(alerts[-1].latency_s - (5000 / FS - 0.07 / 343.0)) < 1e-4  # (less the 7 cm's flight)
+        _, alerts, _ = _run_stream(_among_pings(0.0, 0.1, 1800, 3.0, seed))
+        assert all(a.latency_s is None and a.level == "clear" for a in alerts)
+        assert "no_direct_sound" in alerts[-1].flags
+
+
+def _run_stream(x: np.ndarray):
+    mon = _monitor()
+    alerts, ends = [], []
+    for i in range(0, len(x), 480):
+        alerts.append(mon.process(x[i:i + 480]))
+        ends.append(i + 480)
+    return mon, alerts, ends
