@@ -320,7 +320,7 @@ def test_one_clipped_channel_of_a_stereo_file_is_clipping(tmp_path):
     import soundfile as sf
 
     from vrecho.capture import read_audio
-    from vrecho.features import clipped
+    from vrecho.signals import clipped
 
     t = np.arange(44100) / 44100
     quiet, loud = 0.1 * np.sin(2 * np.pi * 440 * t), np.clip(1.5 * np.sin(2 * np.pi * 440 * t), -1, 1)

@@ -290,6 +290,23 @@ def test_a_tiny_model_beats_chance(tiny_dataset, tmp_path):
     assert res["EchoCNN-E"]["depth_median_cm"] * 3 < chance_cm, (res["EchoCNN-E"]["depth_median_cm"], chance_cm)
 
 
+def test_a_self_referenced_model_answers_without_the_emitted_sound(clf, tiny_dataset, tmp_path, living_room_frames):
+    """EchoCNN-A self-ref trains on the paper protocol's frames (the emitted sound never given)
+    and answers through predict: a classifier whose A is that model reads echo delays off the
+    frame itself, and its depth is one the echo branch can read (0.15 to 5 m)."""
+    from vrecho.classifier import Classifier
+    from vrecho.learn.evaluate import load_method, method, train_methods
+
+    train_methods(tiny_dataset, tmp_path / "run", methods=["EchoCNN-A self-ref"], epochs=1, progress=False)
+    model = load_method(tmp_path / "run", method("EchoCNN-A self-ref"))
+    assert model.inputs == ("self",)
+    mine = Classifier({**clf.models, "A": model}, names={"A": "EchoCNN-A self-ref"})
+    frames, _, _ = living_room_frames
+    preds = mine.predict_batch(frames, 44100)
+    assert all(p.model == "EchoCNN-A self-ref" and 0.15 <= p.depth_m <= 5 for p in preds)
+    assert mine.predict(frames[0], 44100).depth_m == pytest.approx(preds[0].depth_m, abs=1e-4)
+
+
 @pytest.mark.slow
 def test_train_and_evaluate_commands(tiny_dataset, tmp_path):
     run = tmp_path / "run"

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from vrecho.errors import VrechoError
-from vrecho.features import echo_features, echo_response, logmel
+from vrecho.features import echo_features, echo_response, logmel, self_features
 from vrecho.signals import FS, emitted_sound, probe
 
 
@@ -74,3 +74,21 @@ def test_a_planes_echo_is_the_frames_own_whatever_its_batch():
     beside = plane_echo(np.stack([frame, frame]), probe(), [2.3, 9.0])
     assert np.allclose(alone.features[0], beside.features[0], atol=1e-6) and alone.depth_m[0] == beside.depth_m[0]
     assert alone.features[0, 0] > 20
+
+
+@pytest.mark.parametrize("sound", ["clap", "white_noise", "probe"])
+def test_self_features_find_an_echo_without_the_emitted_sound(sound):
+    """The recording as its own reference: the echo 291 samples after the direct sound (itself
+    9 samples after emission, the reference device's 7 cm) stands where the emitted sound's
+    deconvolution puts it, sample 300, whatever the broadband sound and its level."""
+    s = probe() if sound == "probe" else emitted_sound(sound, rng=np.random.default_rng(3))
+    x = _frame([(9, 1.0), (300, 0.3), (520, 0.1)], s)
+    x += 1e-4 * np.random.default_rng(0).standard_normal(FS).astype(np.float32)
+    f = self_features(np.stack([x, 0.01 * x]))
+    assert f.envelope.shape == (2, 1323) and f.bands.shape == (2, 7, 20)
+    assert np.allclose(f.envelope[0], f.envelope[1], atol=1e-3)  # level-invariant
+    env = f.envelope[0]
+    assert int(np.argmax(env[60:])) + 60 == 300 and 0.15 < env[300] < 0.45
+    assert env[520] > 3 * np.median(env[60:])  # the weaker, later echo stands out too
+    with pytest.raises(VrechoError, match="1 s"):
+        self_features(x[:1000])

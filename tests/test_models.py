@@ -6,13 +6,15 @@ from vrecho.models import DEPTH_BINS_M, DEPTH_FT_M, HEADS, SRC_CELLS, EchoCNN
 
 def _batch(n=4):
     return {"mel": torch.randn(n, 62, 25), "image": torch.rand(n, 64, 25),
-            "envelope": torch.rand(n, 1323), "bands": -60 * torch.rand(n, 7, 20), "wave": torch.randn(n, 11025)}
+            "envelope": torch.rand(n, 1323), "bands": -60 * torch.rand(n, 7, 20), "wave": torch.randn(n, 11025),
+            "self_envelope": torch.rand(n, 1323), "self_bands": -60 * torch.rand(n, 7, 20)}
 
 
 @pytest.mark.parametrize("inputs, fusion", [(("mel",), "concat"), (("mel", "image"), "concat"),
                                             (("mel", "image"), "mfb"), (("echo",), "concat"),
                                             (("image",), "concat"), (("echo", "image"), "mfb"),
-                                            (("wave",), "concat")])
+                                            (("wave",), "concat"), (("self",), "concat"),
+                                            (("self", "image"), "concat")])
 def test_every_variant_has_every_head(inputs, fusion):
     model = EchoCNN(inputs, fusion=fusion).eval()
     out = model(_batch())
@@ -47,6 +49,8 @@ def test_the_paper_audio_network_is_small():
 def test_bad_variant():
     with pytest.raises(ValueError, match="inputs"):
         EchoCNN(("radar",))
+    with pytest.raises(ValueError, match="not both echo and self"):
+        EchoCNN(("echo", "self"))
 
 
 @pytest.mark.parametrize("kind", ["knn", "svm"])

@@ -40,10 +40,10 @@ from scipy.special import expit
 from threadpoolctl import ThreadpoolController
 
 from .errors import VrechoError, check_number
-from .features import (BAND_FS, PLANE_TOLERANCE_M, check_emitted, check_frames, check_mic_toward, check_surface, clipped,
-                       echo_features, logmel)
+from .features import (BAND_FS, PLANE_TOLERANCE_M, check_emitted, check_frames, check_mic_toward, check_surface,
+                       echo_features, logmel, self_features)
 from .models import DEPTH_BINS_M, build
-from .signals import FS, MIN_COHERENCE, PULSE_S, analytic_envelope, analytic_filter, check_fs, coherence
+from .signals import FS, MIN_COHERENCE, PULSE_S, analytic_envelope, analytic_filter, check_fs, clipped, coherence
 
 CONFIDENCE_FLOOR = 0.7
 """Below this open/closed probability an answer is marked low-confidence."""
@@ -194,7 +194,7 @@ class Classifier:
         """Many frames at once, each answered as by :meth:`predict`.
 
         Answers that nothing vouches for are flagged (low-confidence, ``confidence`` at most
-        :data:`FLAGGED_CONFIDENCE`): ``clipped``, at least :data:`~vrecho.features.CLIP_SHARE`
+        :data:`FLAGGED_CONFIDENCE`): ``clipped``, at least :data:`~vrecho.signals.CLIP_SHARE`
         of a frame's samples at full scale as given (before resampling); ``low_rate``, ``fs``
         below :data:`~vrecho.features.BAND_FS` (40 kHz); ``no_pulse``, a frame that does not
         begin with a pulse: with ``emitted``, no window within :data:`PULSE_LAG_S` of its start
@@ -340,6 +340,9 @@ def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images:
         out["no_pulse"] = ~_decays(x, int(PULSE_S * FS))
     if images is not None:
         batch["image"] = torch.as_tensor(images)
+    if "self" in model.inputs:
+        f = self_features(x, FS)
+        batch["self_envelope"], batch["self_bands"] = torch.as_tensor(f.envelope), torch.as_tensor(f.bands)
     if "mel" in model.inputs:
         batch["mel"] = torch.as_tensor(logmel(x, FS))
     with torch.no_grad():

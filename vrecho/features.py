@@ -9,7 +9,9 @@ sound known, circular Wiener deconvolution of the frame recovers the room's impu
 (the frame is the steady state of a pulse train, a circular convolution), from which echo delays
 can be read to a fraction of a sample and band energies to a few milliseconds. With a surface's
 distance known as well (a scan's plane), :func:`plane_echo` reads what the response holds where
-that plane must echo.
+that plane must echo. With the emitted sound unknown (the paper's protocol), :func:`self_features`
+reads the same delays off the recording's own whitened autocorrelation: the direct sound is the
+reference.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from dataclasses import dataclass
 import librosa
 import numpy as np
 import scipy.fft
+import scipy.ndimage
 import scipy.signal
 
 from .errors import VrechoError
@@ -38,40 +41,6 @@ BAND_FS = 40_000
 the rate): EchoCNN learned from 44.1 kHz frames, so a frame recorded at a lower rate, resampled,
 lacks what it reads depth and material from (an 8 kHz frame said 3.43 m where 44.1 kHz said
 1.20 m)."""
-CLIP_LEVEL = 0.999
-CLIP_SHARE = 1e-3
-"""A frame with at least this share of samples at full scale (|x| >= 0.999, or 0.999 of its own
-peak above 1) is clipped."""
-
-
-def clipped(audio) -> np.ndarray:
-    """Which frames are clipped, tested on the samples as recorded: resampling or a fractional
-    shift rings past the rail (Gibbs), and the flat tops no longer sit at the peak.
-
-    Parameters
-    ----------
-    audio : numpy.ndarray [shape=(n,) or (B, n)], numbers
-        Frames at their own rate, finite (as :func:`check_frames` takes them).
-
-    Returns
-    -------
-    numpy.ndarray [shape=() or (B,)], bool
-        True where at least :data:`CLIP_SHARE` of a frame's samples reach :data:`CLIP_LEVEL`
-        of full scale (of the frame's peak, where that exceeds 1).
-    """
-    x = np.asarray(audio)
-    out = np.zeros(x.shape[:-1], bool)
-    if not x.shape[-1]:
-        return out
-    peak = np.maximum(x.max(axis=-1), -x.min(axis=-1)).astype(np.float64)
-    near = peak >= CLIP_LEVEL  # below it no sample reaches the rail: most frames end here, at two passes
-    if np.any(near):
-        mag = np.abs(x[near] if x.dtype.kind == "f" else np.asarray(x[near], np.float64))  # |int16 min| overflows
-        rail = (CLIP_LEVEL * np.maximum(peak[near], 1.0)).astype(mag.dtype)
-        out[near] = np.count_nonzero(mag >= rail[..., None], axis=-1) >= CLIP_SHARE * x.shape[-1]
-    return out
-
-
 def check_frames(audio, fs) -> np.ndarray:
     """Validate 1 s frames, shape (n,) or (B, n) at ``fs`` Hz, and return them at 44.1 kHz (float32).
 
@@ -376,24 +345,106 @@ def echo_features(audio, emitted, fs: int = FS, *, surface_m=None, tolerance_m: 
     x = check_frames(audio, fs)
     spectrum = _response_spectrum(x, check_emitted(emitted, fs, None if x.ndim == 1 else len(x)))
     h = scipy.fft.irfft(spectrum, x.shape[-1]).astype(np.float32)  # echo_response's, whole
-    early = h[..., :int(round(ECHO_WINDOW_S * FS))]
+    plane = None
+    if surface_m is not None:
+        rows = spectrum.reshape(-1, spectrum.shape[-1])
+        toward = None if mic_toward_m is None else check_mic_toward(mic_toward_m, len(rows))
+        plane = _plane_echo(rows, check_surface(surface_m, len(rows)), tolerance_m, toward)
+    return EchoFeatures(_direct_one(h[..., :int(round(ECHO_WINDOW_S * FS))]), _decay_bands(h), plane)
+
+
+def _direct_one(early: np.ndarray) -> np.ndarray:
+    """Hilbert envelope of the first 30 ms of responses (..., 1323), divided by its direct-sound
+    peak (the largest value in the first 2 ms), float32."""
     env = np.abs(scipy.signal.hilbert(early, axis=-1))
-    peak = env[..., :int(0.002 * FS)].max(axis=-1, keepdims=True)  # direct sound: first 2 ms
-    envelope = env / np.maximum(peak, 1e-12)
-    # Band energies of 25 ms segments from their spectra (a Hann-windowed FFT per segment, 40 Hz
-    # bins: the 125 Hz octave gets two), four times faster than octave filter banks per frame.
+    peak = env[..., :int(0.002 * FS)].max(axis=-1, keepdims=True)
+    return (env / np.maximum(peak, 1e-12)).astype(np.float32)
+
+
+def _decay_bands(h: np.ndarray) -> np.ndarray:
+    """:attr:`EchoFeatures.bands` of signals (..., n >= 0.5 s) at 44.1 kHz.
+
+    Band energies of 25 ms segments from their spectra (a Hann-windowed FFT per segment, 40 Hz
+    bins: the 125 Hz octave gets two), four times faster than octave filter banks per frame."""
     bin_len = int(0.025 * FS)
     window, bands = _band_sums(bin_len)
     spec = scipy.fft.rfft(h[..., :20 * bin_len].reshape(*h.shape[:-1], 20, bin_len) * window, axis=-1)
     e = np.swapaxes((spec.real ** 2 + spec.imag ** 2) @ bands, -1, -2)  # (..., 7, 20)
     db = 10 * np.log10(np.maximum(e, 1e-20))
     db -= db.max(axis=(-2, -1), keepdims=True)
-    plane = None
-    if surface_m is not None:
-        rows = spectrum.reshape(-1, spectrum.shape[-1])
-        toward = None if mic_toward_m is None else check_mic_toward(mic_toward_m, len(rows))
-        plane = _plane_echo(rows, check_surface(surface_m, len(rows)), tolerance_m, toward)
-    return EchoFeatures(envelope.astype(np.float32), np.maximum(db, -120).astype(np.float32), plane)
+    return np.maximum(db, -120).astype(np.float32)
+
+
+SELF_BAND_HZ = (300.0, 15000.0)
+"""The band :func:`self_features` whitens and reads: what every broadband sound holds, above the
+room's modes."""
+SELF_SMOOTH_HZ = 1000.0
+"""How far :func:`self_features` smooths the frame's power spectrum to whiten it: the sound's
+own colour (slower than this across frequency) goes, an echo's ripple (every 1 / delay Hz, 57
+to 670 Hz for delays of 1.5 to 17.5 ms) stays."""
+SELF_MIC_M = 0.07
+"""The microphone's distance from the loudspeaker that :func:`self_features` assumes (the
+reference device's): where lag 0, the direct sound, is placed."""
+
+
+def self_features(audio, fs: int = FS) -> EchoFeatures:
+    """:class:`EchoFeatures` of frames whose emitted sound is unknown: the recording is its own
+    reference.
+
+    A frame is the emitted sound s convolved with the room's response h, whose first arrival,
+    the direct sound, outweighs every echo. The frame's autocorrelation is s's convolved with
+    h's, and h's holds, at each echo's delay after the direct sound, the echo's strength times
+    the direct sound's. Whitened (the frame's power spectrum divided by itself smoothed over
+    :data:`SELF_SMOOTH_HZ`, within :data:`SELF_BAND_HZ`), s's autocorrelation narrows to a
+    spike for any broadband sound, and what is left is h's, read like :func:`echo_features`'
+    response: its envelope over the first 30 ms, lag 0 placed at the direct sound's delay for a
+    microphone :data:`SELF_MIC_M` from the loudspeaker and divided by its peak. A periodic
+    sound (a voice's pitch, a tone) correlates with itself at its period as an echo would:
+    physics, not the method, bounds those. ``bands`` is the frame's own band energy decay.
+
+    Parameters
+    ----------
+    audio : array_like, shape (n,) or (B, n), float
+        1 s frames starting at the sound's onset, n = round(``fs``) samples.
+    fs : int
+        Sample rate in Hz (resampled to 44.1 kHz).
+
+    Returns
+    -------
+    EchoFeatures
+        ``envelope`` (..., 1323) and ``bands`` (..., 7, 20), float32; ``plane`` None.
+
+    Raises
+    ------
+    VrechoError
+        For frames :func:`check_frames` refuses.
+
+    Examples
+    --------
+    White noise and its echo at half the amplitude, 300 samples later:
+
+    >>> rng = np.random.default_rng(0)
+    >>> s = rng.standard_normal(44_100).astype(np.float32)
+    >>> x = 0.1 * (s + 0.5 * np.roll(s, 300))
+    >>> e = self_features(x).envelope
+    >>> lag0 = int(round(SELF_MIC_M / SPEED_OF_SOUND * FS))
+    >>> int(np.argmax(e[lag0 + 50:])) + 50, round(float(e[lag0 + 300]), 1)
+    (300, 0.4)
+    """
+    x = check_frames(audio, fs)
+    length = int(round(ECHO_WINDOW_S * FS))
+    lag0 = int(round(SELF_MIC_M / SPEED_OF_SOUND * FS))
+    n = scipy.fft.next_fast_len(x.shape[-1] + length, real=True)  # no lag wraps onto another
+    spec = scipy.fft.rfft(x, n, axis=-1)
+    power = (spec.real ** 2 + spec.imag ** 2).astype(np.float32)
+    f = np.fft.rfftfreq(n, 1 / FS)
+    width = max(int(round(SELF_SMOOTH_HZ / (f[1] - f[0]))), 1)
+    smooth = scipy.ndimage.uniform_filter1d(power, width, axis=-1, mode="nearest")
+    band = _band(f, *SELF_BAND_HZ).astype(np.float32)
+    white = band * power / (smooth + 1e-6 * smooth.max(axis=-1, keepdims=True) + 1e-30)  # -60 dB: not lifted
+    r = scipy.fft.irfft(white, n, axis=-1)[..., :length - lag0 + 1]
+    early = np.concatenate([r[..., lag0:0:-1], r[..., :length - lag0]], axis=-1)  # lag 0 at the direct sound's delay
+    return EchoFeatures(_direct_one(early), _decay_bands(x))
 
 
 @functools.lru_cache(maxsize=2)

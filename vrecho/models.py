@@ -299,7 +299,7 @@ class MFB(nn.Module):
         return F.normalize(z, dim=1)
 
 
-INPUTS = ("mel", "image", "echo", "wave")
+INPUTS = ("mel", "image", "echo", "self", "wave")
 
 
 class EchoCNN(nn.Module):
@@ -307,11 +307,14 @@ class EchoCNN(nn.Module):
 
     Parameters
     ----------
-    inputs : tuple of {"mel", "image", "echo", "wave"}
-        ``("mel",)``: EchoCNN-A; ``("mel", "image")``: EchoCNN-AV; ``("echo",)``: EchoCNN-E
-        (emitted sound known); ``("echo", "image")``: EchoCNN-EV; ``("image",)``: the
-        visual-only baseline; ``("wave",)``: the SoundNet-style baseline. ``("mel",)`` by
-        default.
+    inputs : tuple of {"mel", "image", "echo", "self", "wave"}
+        ``("mel",)``: the paper's EchoCNN-A; ``("mel", "image")``: its EchoCNN-AV;
+        ``("self",)``: EchoCNN-A reading echo delays off the recording's own autocorrelation
+        (emitted sound unknown, :func:`vrecho.features.self_features`), and ``("self",
+        "image")`` with the camera; ``("echo",)``: EchoCNN-E (emitted sound known);
+        ``("echo", "image")``: EchoCNN-EV; ``("image",)``: the visual-only baseline;
+        ``("wave",)``: the SoundNet-style baseline. "echo" and "self" share one
+        :class:`EchoBranch` design and exclude each other. ``("mel",)`` by default.
     fusion : {"concat", "mfb"}
         How two branches meet (ignored with one; "mfb" only with exactly two); "concat" by
         default.
@@ -330,7 +333,8 @@ class EchoCNN(nn.Module):
     Raises
     ------
     ValueError
-        If ``inputs`` is empty or names an unknown input, or ``fusion`` is unknown.
+        If ``inputs`` is empty, names an unknown input or both "echo" and "self", or ``fusion``
+        is unknown.
 
     Examples
     --------
@@ -343,8 +347,8 @@ class EchoCNN(nn.Module):
     def __init__(self, inputs: tuple[str, ...] = ("mel",), *, fusion: str = "concat", hidden: int = 128,
                  dropout: float = 0.3, wave_layers: int = 8):
         super().__init__()
-        if not inputs or not set(inputs) <= set(INPUTS):
-            raise ValueError(f"inputs: expected some of {', '.join(INPUTS)}; got {inputs!r}")
+        if not inputs or not set(inputs) <= set(INPUTS) or {"echo", "self"} <= set(inputs):
+            raise ValueError(f"inputs: expected some of {', '.join(INPUTS)} (not both echo and self); got {inputs!r}")
         if fusion not in ("concat", "mfb"):
             raise ValueError(f"fusion: expected concat or mfb, got {fusion!r}")
         self.inputs, self.fusion = tuple(inputs), fusion
@@ -353,8 +357,9 @@ class EchoCNN(nn.Module):
         self.branches = nn.ModuleDict()
         if "mel" in inputs:
             self.branches["mel"] = AudioBranch(hidden=hidden)
-        if "echo" in inputs:
-            self.branches["echo"] = EchoBranch(hidden=hidden)
+        for name in ("echo", "self"):
+            if name in inputs:
+                self.branches[name] = EchoBranch(hidden=hidden)
         if "wave" in inputs:
             self.branches["wave"] = SoundNetBranch(n_layers=wave_layers, hidden=hidden)
         if "image" in inputs:
@@ -382,8 +387,9 @@ class EchoCNN(nn.Module):
         ----------
         batch : dict of str to torch.Tensor
             The variant's inputs, float32: ``mel`` (B, 62, 25), ``image`` (B, 64, 25) in
-            [0, 1], ``envelope`` (B, 1323) and ``bands`` (B, 7, 20) for ``echo``, ``wave``
-            (B, 11025). Other keys are ignored.
+            [0, 1], ``envelope`` (B, 1323) and ``bands`` (B, 7, 20) for ``echo``
+            (``self_envelope`` and ``self_bands`` for ``self``), ``wave`` (B, 11025). Other keys
+            are ignored.
 
         Returns
         -------
@@ -395,9 +401,11 @@ class EchoCNN(nn.Module):
         """
         feats, echo_depth = [], None
         for name, branch in self.branches.items():
-            if name == "echo":
-                f, echo_depth, delay_scores = branch(batch["envelope"], batch["bands"])
+            if name in ("echo", "self"):
+                key = "" if name == "echo" else "self_"
+                f, echo_depth, delay_scores = branch(batch[key + "envelope"], batch[key + "bands"])
                 feats.append(f)
+                out_at = branch.depth_at
             else:
                 feats.append(branch(batch[name]))
         if hasattr(self, "mfb"):
@@ -414,7 +422,7 @@ class EchoCNN(nn.Module):
             for head, centres in (("depth_bin", self.depth_bins), ("depth_ft", self.depth_ft)):
                 out[head] = -(out["depth_m"][:, None] - centres[None]).abs() / 0.1
             out["delay_scores"] = delay_scores
-            out["depth_at"] = self.branches["echo"].depth_at
+            out["depth_at"] = out_at
         return out
 
 

@@ -453,3 +453,37 @@ def parabolic_peaks(y: np.ndarray, i: np.ndarray) -> np.ndarray:
     den = a - 2 * b + c
     bend = inner & (den < 0)
     return i + np.where(bend, 0.5 * (a - c) / np.where(bend, den, -1.0), 0.0)
+
+
+CLIP_LEVEL = 0.999
+CLIP_SHARE = 1e-3
+"""A frame with at least this share of samples at full scale (|x| >= 0.999, or 0.999 of its own
+peak above 1) is clipped."""
+
+
+def clipped(audio) -> np.ndarray:
+    """Which frames are clipped, tested on the samples as recorded: resampling or a fractional
+    shift rings past the rail (Gibbs), and the flat tops no longer sit at the peak.
+
+    Parameters
+    ----------
+    audio : numpy.ndarray [shape=(n,) or (B, n)], numbers
+        Frames at their own rate, finite (as :func:`vrecho.features.check_frames` takes them).
+
+    Returns
+    -------
+    numpy.ndarray [shape=() or (B,)], bool
+        True where at least :data:`CLIP_SHARE` of a frame's samples reach :data:`CLIP_LEVEL`
+        of full scale (of the frame's peak, where that exceeds 1).
+    """
+    x = np.asarray(audio)
+    out = np.zeros(x.shape[:-1], bool)
+    if not x.shape[-1]:
+        return out
+    peak = np.maximum(x.max(axis=-1), -x.min(axis=-1)).astype(np.float64)
+    near = peak >= CLIP_LEVEL  # below it no sample reaches the rail: most frames end here, at two passes
+    if np.any(near):
+        mag = np.abs(x[near] if x.dtype.kind == "f" else np.asarray(x[near], np.float64))  # |int16 min| overflows
+        rail = (CLIP_LEVEL * np.maximum(peak[near], 1.0)).astype(mag.dtype)
+        out[near] = np.count_nonzero(mag >= rail[..., None], axis=-1) >= CLIP_SHARE * x.shape[-1]
+    return out

@@ -13,7 +13,7 @@ import soundfile as sf
 from PIL import Image
 
 from ..errors import VrechoError
-from ..features import CLIP_LEVEL
+from ..signals import CLIP_LEVEL
 
 
 def read_video(path) -> tuple[np.ndarray, int, np.ndarray]:
@@ -226,7 +226,7 @@ def read_audio(path) -> tuple[np.ndarray, int]:
     audio : numpy.ndarray [shape=(n,)], float32
         The channels averaged; where any channel reaches full scale (clipped), the mix is at
         full scale too, with that channel's sign, so that the clipping test
-        (:func:`~vrecho.features.clipped`) sees a clipped channel in the mix.
+        (:func:`~vrecho.signals.clipped`) sees a clipped channel in the mix.
     fs : int
         Its sample rate in Hz.
 

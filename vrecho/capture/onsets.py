@@ -39,9 +39,9 @@ from scipy.ndimage import maximum_filter1d
 
 from ..device import MIC_ABOVE_EMITTER_M
 from ..errors import VrechoError, check_number
-from ..features import BAND_FS, clipped
+from ..features import BAND_FS
 from ..signals import (FS, MIN_COHERENCE, PERIOD_S, SPEED_OF_SOUND, analytic_envelope, analytic_filter, check_fs,
-                       coherence, parabolic_peaks, probe)
+                       clipped, coherence, parabolic_peaks, probe)
 
 PULSE_TRAIN_WAV = Path(__file__).resolve().parent.parent / "assets" / "pulse_train.wav"
 """The pulse train for the second phone to play (on repeat): 30 s of vrecho's probe once a
@@ -280,7 +280,7 @@ def frame_flags(audio, onsets: Onsets, index, *, length_s: float = 1.0,
     """What the recording says of each frame :func:`cut_frames` cut from it, by EchoCNN's rules
     (:mod:`vrecho.classifier`), before the resampling and the fractional shift (which ring past
     the rail and hide clipping): ``clipped``, the frame's ``length_s`` as recorded
-    (:func:`vrecho.features.clipped`); ``low_rate``, a recording below
+    (:func:`vrecho.signals.clipped`); ``low_rate``, a recording below
     :data:`~vrecho.features.BAND_FS` (40 kHz: the probe's band does not fit).
 
     Parameters

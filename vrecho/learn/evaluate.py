@@ -28,9 +28,10 @@ from pathlib import Path
 import numpy as np
 import torch  # this module trains and judges models: torch is what it is for
 from scipy.signal import resample_poly
+from tqdm import tqdm
 
 from ..errors import VrechoError, check_count, read_json
-from ..features import echo_features
+from ..features import echo_features, self_features
 from ..io import OutputFolder, atomic_write_text, ensure_writable_dir
 from ..models import HEADS, EchoCNN, FeatureBaseline, build
 from . import cluster
@@ -103,6 +104,8 @@ METHODS = (
     Method("SoundNet-5", "cnn", ("wave",), wave_layers=5, max_epochs=8),
     Method("SoundNet-8", "cnn", ("wave",), wave_layers=8, max_epochs=8),
     Method("visual only", "cnn", ("image",)),
+    Method("EchoCNN-A self-ref", "cnn", ("self",)),
+    Method("EchoCNN-AV self-ref", "cnn", ("self", "image")),
     Method("EchoCNN-E", "cnn", ("echo",), protocol="product"),
     Method("EchoCNN-EV", "cnn", ("echo", "image"), protocol="product"),
     Method("kNN (echo)", "knn", ("envelope", "bands"), protocol="product"),
@@ -210,20 +213,24 @@ class Frames:
 
         Parameters
         ----------
-        keys : iterable of {"mel", "image", "wave", "echo", "envelope", "bands"}
+        keys : iterable of {"mel", "image", "wave", "echo", "envelope", "bands", "self", "self_envelope", "self_bands"}
+            ``self`` means ``self_envelope`` and ``self_bands``.
 
         Returns
         -------
         dict of str to torch.Tensor
             ``mel`` (N, 62, 25), ``image`` (N, 64, 25) in [0, 1], ``wave`` (N, 11025) at
-            11.025 kHz, ``envelope`` (N, 1323) and ``bands`` (N, 7, 20); all float32.
+            11.025 kHz, ``envelope`` (N, 1323) and ``bands`` (N, 7, 20) (echo features, the
+            emitted sound known), ``self_envelope`` and ``self_bands`` (the same from the
+            recording alone, :func:`~vrecho.features.self_features`); all float32.
 
         Raises
         ------
         VrechoError
             For echo features under the paper protocol (no emitted sound), or an unknown name.
         """
-        names = [k for key in keys for k in (("envelope", "bands") if key == "echo" else (key,))]
+        pairs = {"echo": ("envelope", "bands"), "self": ("self_envelope", "self_bands")}
+        names = [k for key in keys for k in pairs.get(key, (key,))]
         for name in names:
             if name in self._x:
                 continue
@@ -233,17 +240,20 @@ class Frames:
                 self._x[name] = torch.as_tensor(_read_rows(self.ds.image, self.rows), dtype=torch.float32) / 255
             elif name == "wave":  # the SoundNet baselines' 11.025 kHz
                 self._x[name] = torch.as_tensor(resample_poly(self._audio(), 1, 4, axis=1).astype(np.float32))
-            elif name in ("envelope", "bands"):
-                if self.protocol != "product":
+            elif name in ("envelope", "bands", "self_envelope", "self_bands"):
+                own = name.startswith("self_")
+                if not own and self.protocol != "product":
                     raise VrechoError("echo features need the emitted sound: use the product protocol")
-                self._audio()
                 env, bands = [], []
-                for i in range(0, len(self), 256):
-                    f = echo_features(self._audio()[i:i + 256], self.emitted[i:i + 256])
+                for i in tqdm(range(0, len(self), 256), desc="self-referenced echoes" if own else "echo features",
+                              disable=not self.progress, leave=False):
+                    part = self._audio()[i:i + 256]
+                    f = self_features(part) if own else echo_features(part, self.emitted[i:i + 256])
                     env.append(f.envelope)
                     bands.append(f.bands)
-                self._x["envelope"] = torch.as_tensor(np.concatenate(env))
-                self._x["bands"] = torch.as_tensor(np.concatenate(bands))
+                prefix = "self_" if own else ""
+                self._x[prefix + "envelope"] = torch.as_tensor(np.concatenate(env))
+                self._x[prefix + "bands"] = torch.as_tensor(np.concatenate(bands))
             else:
                 raise VrechoError(f"unknown input {name!r}")
         return {k: self._x[k] for k in names}
