@@ -25,6 +25,7 @@ import scipy.fft
 import scipy.ndimage
 import scipy.signal
 
+from .device import MIC_ABOVE_EMITTER_M
 from .errors import VrechoError
 from .signals import FS, SPEED_OF_SOUND, check_fs, parabolic_peaks
 
@@ -382,9 +383,6 @@ SELF_SMOOTH_HZ = 1000.0
 """How far :func:`self_features` smooths the frame's power spectrum to whiten it: the sound's
 own colour (slower than this across frequency) goes, an echo's ripple (every 1 / delay Hz, 57
 to 670 Hz for delays of 1.5 to 17.5 ms) stays."""
-SELF_MIC_M = 0.07
-"""The microphone's distance from the loudspeaker that :func:`self_features` assumes (the
-reference device's): where lag 0, the direct sound, is placed."""
 
 
 def self_features(audio, fs: int = FS) -> EchoFeatures:
@@ -398,9 +396,10 @@ def self_features(audio, fs: int = FS) -> EchoFeatures:
     :data:`SELF_SMOOTH_HZ`, within :data:`SELF_BAND_HZ`), s's autocorrelation narrows to a
     spike for any broadband sound, and what is left is h's, read like :func:`echo_features`'
     response: its envelope over the first 30 ms, lag 0 placed at the direct sound's delay for a
-    microphone :data:`SELF_MIC_M` from the loudspeaker and divided by its peak. A periodic
-    sound (a voice's pitch, a tone) correlates with itself at its period as an echo would:
-    physics, not the method, bounds those. ``bands`` is the frame's own band energy decay.
+    microphone :data:`~vrecho.device.MIC_ABOVE_EMITTER_M` from the loudspeaker (the reference
+    device's, as :class:`~vrecho.models.EchoBranch` maps delays to depth) and divided by its
+    peak. A periodic sound (a voice's pitch, a tone) correlates with itself at its period as an
+    echo would: physics, not the method, bounds those. ``bands`` is the frame's own band energy decay.
 
     Parameters
     ----------
@@ -427,13 +426,13 @@ def self_features(audio, fs: int = FS) -> EchoFeatures:
     >>> s = rng.standard_normal(44_100).astype(np.float32)
     >>> x = 0.1 * (s + 0.5 * np.roll(s, 300))
     >>> e = self_features(x).envelope
-    >>> lag0 = int(round(SELF_MIC_M / SPEED_OF_SOUND * FS))
+    >>> lag0 = int(round(MIC_ABOVE_EMITTER_M / SPEED_OF_SOUND * FS))
     >>> int(np.argmax(e[lag0 + 50:])) + 50, round(float(e[lag0 + 300]), 1)
     (300, 0.4)
     """
     x = check_frames(audio, fs)
     length = int(round(ECHO_WINDOW_S * FS))
-    lag0 = int(round(SELF_MIC_M / SPEED_OF_SOUND * FS))
+    lag0 = int(round(MIC_ABOVE_EMITTER_M / SPEED_OF_SOUND * FS))
     n = scipy.fft.next_fast_len(x.shape[-1] + length, real=True)  # no lag wraps onto another
     spec = scipy.fft.rfft(x, n, axis=-1)
     power = (spec.real ** 2 + spec.imag ** 2).astype(np.float32)
