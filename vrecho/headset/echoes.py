@@ -1,6 +1,7 @@
 """A pulse's echoes in the microphone's envelope (:class:`EchoFinder`), and the geometry that turns
 an echo's delay after the direct sound into the distance of the surface ahead
-(:func:`mic_geometry`, :func:`echo_path`, :func:`echo_distance`).
+(:func:`mic_geometry`, :func:`echo_path`; its inverse, compiled, is
+:func:`~vrecho.headset.kernels.echo_distance`).
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from scipy.ndimage import maximum_filter1d
 
 from ..errors import VrechoError
 from ..signals import SPEED_OF_SOUND, analytic_envelope, analytic_filter
-from .kernels import echo_peaks
+from .kernels import echo_distance, echo_peaks
 from .ranging import GUARD, Envelope, at_rail
 
 
@@ -180,30 +181,12 @@ def echo_path(d, spacing: float, forward: float):
     -------
     float or numpy.ndarray
         Metres, the path less the direct path (``spacing``).
-    """
-    return np.sqrt(4 * d * d - 4 * d * forward + spacing * spacing) - spacing
-
-
-def echo_distance(excess, spacing: float, forward: float):
-    """:func:`echo_path` inverted: the distance to the surface ahead whose echo came ``excess``
-    metres of path after the direct sound.
-
-    Parameters
-    ----------
-    excess : float or numpy.ndarray
-        Metres of path after the direct sound.
-    spacing, forward : float
-        :func:`mic_geometry`'s.
-
-    Returns
-    -------
-    float or numpy.ndarray
-        Metres.
 
     Examples
     --------
+    Inverted by :func:`~vrecho.headset.kernels.echo_distance`:
+
     >>> round(float(echo_distance(echo_path(1.2, 0.05, 0.03), 0.05, 0.03)), 9)
     1.2
     """
-    path = excess + spacing
-    return 0.5 * (forward + np.sqrt(np.maximum(forward * forward - spacing * spacing + path * path, 0.0)))
+    return np.sqrt(4 * d * d - 4 * d * forward + spacing * spacing) - spacing

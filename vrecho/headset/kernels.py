@@ -1,7 +1,7 @@
 """The headset call's per-pulse work, compiled (numba, cached on disk): the block's read
-(:func:`take`), a pulse's echoes in its envelope (:func:`echo_peaks`), their pairing with the
-tracks (:func:`pair`), the lines that start tracks (:func:`lines`), and the tracks' fits
-(:func:`closest_approach`, :func:`passing`). Plain loops over a few hundred lags or a few dozen
+(:func:`take`), a pulse's echoes in its envelope (:func:`echo_peaks`, their distances
+:func:`echo_distance`), their pairing with the tracks (:func:`pair`), the lines that start
+tracks (:func:`lines`), and the tracks' fits (:func:`closest_approach`, :func:`passing`). Plain loops over a few hundred lags or a few dozen
 echoes, where a score of array calls cost more than the work; :mod:`.boundary`, :mod:`.echoes`
 and :mod:`.tracks` call them and say what each means. :func:`compile_kernels` makes them (or
 loads them from numba's cache) before any audio callback needs them.
@@ -78,6 +78,27 @@ def take(x, out, at):  # pragma: no cover (compiled)
 
 
 @njit(cache=True, nogil=True)
+def echo_distance(excess, spacing, forward):  # pragma: no cover (compiled)
+    """:func:`~vrecho.headset.echoes.echo_path` inverted: the distance to the surface ahead whose
+    echo came ``excess`` metres of path after the direct sound (:func:`echo_peaks` uses it).
+
+    Parameters
+    ----------
+    excess : float
+        Metres of path after the direct sound.
+    spacing, forward : float
+        :func:`~vrecho.headset.echoes.mic_geometry`'s.
+
+    Returns
+    -------
+    float
+        Metres.
+    """
+    path = excess + spacing
+    return 0.5 * (forward + np.sqrt(max(forward * forward - spacing * spacing + path * path, 0.0)))
+
+
+@njit(cache=True, nogil=True)
 def echo_peaks(span, lo, threshold, peak_direct, sidelobe, lobes, offset, metres_per_sample, spacing, forward,
             min_range_m, max_range_m):  # pragma: no cover (compiled)
     """:meth:`EchoFinder.find <vrecho.headset.echoes.EchoFinder.find>`'s core: a pulse's echoes in its
@@ -151,8 +172,7 @@ def echo_peaks(span, lo, threshold, peak_direct, sidelobe, lobes, offset, metres
         den = y0 - 2.0 * y1 + y2
         x = p + 0.5 * (y0 - y2) / den if den < 0 else np.float64(p)
         excess = metres_per_sample * (x + offset)
-        path = excess + spacing
-        dist = 0.5 * (forward + np.sqrt(max(forward * forward - spacing * spacing + path * path, 0.0)))
+        dist = echo_distance(excess, spacing, forward)
         if excess > 0 and min_range_m <= dist <= max_range_m:
             d[kept] = dist
             strength[kept] = v / peak_direct

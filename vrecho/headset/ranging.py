@@ -263,7 +263,7 @@ class ProbeSchedule:
             k = self.first_at_or_after(max(start - m + 1, 0))
         while (e := self.emission(k)) < end:
             lo, hi = max(e, start), min(e + m, end)
-            seg = self.probes[self._pulse(k)[1]][lo - e:hi - e]
+            seg = self.probe(k)[lo - e:hi - e]
             out[lo - start:hi - start] = seg[:, None] if out.ndim == 2 else seg
             if e + m > end:
                 break
