@@ -1,8 +1,9 @@
 """The headset call's per-pulse work, compiled (numba, cached on disk): the block's read
 (:func:`take`), a pulse's echoes in its envelope (:func:`echo_peaks`, their distances
-:func:`echo_distance`), their pairing with the tracks (:func:`pair`), the lines that start
-tracks (:func:`lines`), and the tracks' fits (:func:`closest_approach`, :func:`passing`). Plain loops over a few hundred lags or a few dozen
-echoes, where a score of array calls cost more than the work; :mod:`.boundary`, :mod:`.echoes`
+:func:`echo_distance`), their pairing with the tracks (:func:`pair`, strengths weighed by
+:func:`amplitude_llr`), the lines that start tracks (:func:`lines`), and the tracks' fits
+(:func:`closest_approach`, :func:`passing`). Plain loops over a few hundred lags or a few
+dozen echoes, where a score of array calls cost more than the work; :mod:`.boundary`, :mod:`.echoes`
 and :mod:`.tracks` call them and say what each means. :func:`compile_kernels` makes them (or
 loads them from numba's cache) before any audio callback needs them.
 """
@@ -29,6 +30,7 @@ def compile_kernels() -> None:
     closest_approach(np.arange(10.0), np.ones(10), np.array([0.6, 0.45]), 0.4)
     passing(np.arange(10.0), np.ones(10), np.array([0.5]), 0.6)
     pair(np.ones(2), np.ones(2), np.ones(1), np.ones(1), 1.0, 0.01)
+    amplitude_llr(1.0, 1.0)  # (Track.update calls it too)
     lines(np.ones(1), np.ones(1), np.ones(1), 0.5, -0.1, 0.1, 0.006)
     _COMPILED = True
 
@@ -382,6 +384,35 @@ def lines(d0, d1, d2, middle_at, least, most, tolerance_m):  # pragma: no cover 
 
 
 @njit(cache=True, nogil=True)
+def amplitude_llr(strength, clutter_strength):  # pragma: no cover (compiled)
+    """The evidence an echo's strength gives that it is a surface's and not a stray peak.
+
+    Stray peaks' strengths fall off as an exponential from their mean ``m``; a surface's echo is
+    as likely at any strength up to a few times that: the log-likelihood ratio is ``a / m - 1``
+    (0 on average for stray peaks), bounded to [-1, 3] (one echo never decides alone).
+
+    Parameters
+    ----------
+    strength : float
+        The echo's peak as a share of the direct sound's.
+    clutter_strength : float
+        The mean of its pulse's peaks' strengths (> 0).
+
+    Returns
+    -------
+    float
+        Nats.
+
+    Examples
+    --------
+    >>> amplitude_llr(0.02, 0.02), amplitude_llr(0.08, 0.02), amplitude_llr(0.001, 0.02)
+    (0.0, 3.0, -0.95)
+    """
+    x = strength / clutter_strength - 1.0
+    return -1.0 if x < -1.0 else 3.0 if x > 3.0 else x
+
+
+@njit(cache=True, nogil=True)
 def pair(d, strength, predicted, gates, mean, sigma_m):  # pragma: no cover (compiled)
     """:func:`~vrecho.headset.tracks.associate`'s pairing: the likeliest pairs of echo and track
     within the tracks' gates first (the score's terms, :meth:`~vrecho.headset.tracks.Track.update`:
@@ -405,10 +436,7 @@ def pair(d, strength, predicted, gates, mean, sigma_m):  # pragma: no cover (com
     """
     js, iis, costs = [], [], []
     for j in range(len(d)):
-        llr = 0.0
-        if mean > 0.0:
-            x = strength[j] / mean - 1.0
-            llr = -1.0 if x < -1.0 else 3.0 if x > 3.0 else x  # (amplitude_llr)
+        llr = amplitude_llr(strength[j], mean) if mean > 0.0 else 0.0
         for i in range(len(predicted)):
             gap = abs(d[j] - predicted[i])
             if gap < gates[i]:

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .kernels import closest_approach, lines, pair, passing
+from .kernels import amplitude_llr, closest_approach, lines, pair, passing
 
 
 _SIGMA_M = 0.01
@@ -27,34 +27,6 @@ _LOG_YOUNG_GATE = math.log(2 * 0.12)
 _FLOOR, _CEILING = -10.0, 30.0  # the score's bounds: the last half second of echoes tells
 CONFIRMED = math.log(100.0)
 """A track's :attr:`~Track.score` from which its echoes count as a surface's."""
-
-
-def amplitude_llr(strength: float, clutter_strength: float) -> float:
-    """The evidence an echo's strength gives that it is a surface's and not a stray peak.
-
-    Stray peaks' strengths fall off as an exponential from their mean ``m``; a surface's echo is
-    as likely at any strength up to a few times that: the log-likelihood ratio is ``a / m - 1``
-    (0 on average for stray peaks), bounded to [-1, 3] (one echo never decides alone).
-
-    Parameters
-    ----------
-    strength : float
-        The echo's peak as a share of the direct sound's.
-    clutter_strength : float
-        The mean of its pulse's peaks' strengths (> 0).
-
-    Returns
-    -------
-    float
-        Nats.
-
-    Examples
-    --------
-    >>> amplitude_llr(0.02, 0.02), amplitude_llr(0.08, 0.02), amplitude_llr(0.001, 0.02)
-    (0.0, 3.0, -0.95)
-    """
-    x = strength / clutter_strength - 1.0
-    return -1.0 if x < -1.0 else 3.0 if x > 3.0 else x
 
 
 def clutter_strength(echoes) -> float:
