@@ -48,11 +48,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import minimize_scalar
+from scipy.signal import resample_poly
 
 from vrecho.errors import VrechoError, check_count, check_number
 from vrecho.signals import SPEED_OF_SOUND
 
-from .capture import MAX_COORD_M, Capture
+from .capture import FS, MAX_COORD_M, Capture
 
 BAND_HZ = (200.0, 7000.0)
 NFFT = 512
@@ -358,12 +359,15 @@ class Votes:
         self.el = np.radians(np.arange(-self.EL_MAX, self.EL_MAX + 1e-9, self.EL_STEP))
         A, E = np.meshgrid(self.az, self.el, indexing="ij")
         self.dirs = np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], -1).reshape(-1, 3)
-        fs = captures[0].fs
-        band = _band(fs)
-        freqs = np.fft.rfftfreq(NFFT, 1 / fs)[band]
+        band = _band(FS) & (np.fft.rfftfreq(NFFT, 1 / FS) <= 0.45 * captures[0].fs)  # (an 8 kHz capture: to 3.6 kHz)
+        freqs = np.fft.rfftfreq(NFFT, 1 / FS)[band]
         self.votes, self.weights = [], []
         for c in captures:
-            X = stft(c.audio)[:, band].astype(np.complex64)  # (M, F, T)
+            # at localization's own rate, whatever the capture's: the band fits, and a bin keeps its
+            # width and a frame its 32 ms (at 48 kHz NFFT samples were 11 ms and 94 Hz)
+            g = np.gcd(c.fs, FS)
+            audio = c.audio if c.fs == FS else resample_poly(c.audio, FS // g, c.fs // g, axis=1)
+            X = stft(audio)[:, band].astype(np.complex64)  # (M, F, T)
             energy = (np.abs(X) ** 2).sum(axis=0)  # (F, T)
             before = np.full_like(energy, np.inf)
             before[:, ONSET_FRAMES:] = np.stack([energy[:, ONSET_FRAMES - i:energy.shape[1] - i]
@@ -501,7 +505,9 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
     Parameters
     ----------
     captures : Capture or iterable of Capture
-        The walk's captures, at one sample rate, each with at least 2 microphones.
+        The walk's captures, at one sample rate, each with at least 2 microphones; heard at
+        16 kHz (:data:`~localization.capture.FS`) whatever their rate, so that the answer does
+        not depend on it.
     n_sources : int, optional
         The most sources to find, 1 to :data:`MAX_SOURCES` (None: estimated, at most
         ``max_sources``; a next peak weaker than ``min_strength`` times the first is not a

@@ -82,6 +82,23 @@ def test_informed_at_another_rate(two_sources):
     assert _sir_gain(resample_poly(sim.images[4, :, 0], 3, 1, axis=1), y, hi.audio[0]) > 12.0  # 18.7 dB
 
 
+def test_locate_does_not_depend_on_the_rate(two_sources):
+    """The same captures at 16, 44.1 and 48 kHz put the sources in the same places (before, 48 kHz
+    halved the STFT's frames to 11 ms and tripled its bins' width)."""
+    from scipy.signal import resample_poly
+
+    from localization import Capture, locate
+
+    room, sim = two_sources
+    at = {16000: locate(sim.captures, 2, bounds=((0, 0, 0), room.dims)).positions}
+    for fs, (up, down) in ((44100, (441, 160)), (48000, (3, 1))):
+        caps = [Capture(resample_poly(c.audio, up, down, axis=1), fs, c.mics, start_s=c.start_s) for c in sim.captures]
+        at[fs] = locate(caps, 2, bounds=((0, 0, 0), room.dims)).positions
+    for fs in (44100, 48000):
+        assert at[fs].shape == at[16000].shape == (2, 3)
+        assert np.abs(at[fs] - at[16000]).max() < 0.03, (fs, at[fs], at[16000])
+
+
 @pytest.mark.slow
 def test_mask_network(two_sources, tmp_path):
     """Shares from 0 to 1 per bin and source, each source's larger where it is louder; one source
