@@ -18,10 +18,13 @@ with the device's geometry known (``mic_toward_surface_m``, as the reconstructio
 Per condition: frames, open/closed accuracy with ``surface_m`` (the physics), without it
 (EchoCNN-E, the shipped model, the same frames with the probe known; EchoCNN-A, the paper's
 protocol, the probe unknown), the expected calibration error of each answer's probability (10
-bins), and the share of frames where another echo of the room (an image source of order 1 to
+bins; beside the physics', what a perfectly calibrated model's would be on as many frames by
+chance: :func:`ece_floor`), and the share of frames where another echo of the room (an image source of order 1 to
 3 that never touches the surface: the floor, the ceiling, another wall, a corner of the
 surface's wall with one of them) arrives within the window the echo is looked for in (:func:`crowded`):
-one microphone hears delays, not directions, so those frames are bounded by physics.
+one microphone hears delays, not directions, so those frames are bounded by physics. The last
+column bounds it: the same features read at the echo's exact path (the true distance and the
+microphone's true offset, :func:`exact`), weighed by a logistic fitted on the tuning frames.
 
 Usage: ``python3 benchmarks/bench_surface.py [--frames 60] [--walks 20] [--fit]``; ``--fit`` tunes
 the weights on the tuning seeds and conditions and prints them (to paste into the classifier).
@@ -111,6 +114,40 @@ def ece(p: np.ndarray, y: np.ndarray, bins: int = 10) -> float:
     return float(total)
 
 
+def ece_floor(p: np.ndarray, draws: int = 400) -> float:
+    """The median :func:`ece` of a perfectly calibrated model giving the probabilities ``p``
+    (each answer drawn true with its own probability): what so few frames show by chance alone
+    (60 frames of spread-out probabilities: some 11 %; 720: some 3 %)."""
+    rng = np.random.default_rng(0)
+    return float(np.median([ece(p, rng.random(len(p)) < p) for _ in range(draws)]))
+
+
+def exact(rows) -> np.ndarray:
+    """:func:`vrecho.features.plane_echo`'s features of frames asked at their surface's exact
+    distance and the microphone's exact offset toward it (1 mm of tolerance): what one frame's
+    microphone holds where the echo must be, with nothing of the scan's or the pose's error."""
+    from vrecho.features import plane_echo
+
+    out = np.empty((len(rows), 6))
+    for fs in sorted({r[0].device.fs for r in rows}):
+        idx = [i for i, r in enumerate(rows) if r[0].device.fs == fs]
+        f = [rows[i][0] for i in idx]
+        out[idx] = plane_echo(np.stack([x.audio for x in f]), np.stack([x.emitted for x in f]), [x.depth_m for x in f],
+                              fs, tolerance_m=0.001, mic_toward_m=[x.mic_toward_m for x in f]).features
+    return out
+
+
+def bound(cache, n: int):
+    """The exact path's logistic (:func:`exact`'s features), fitted on the tuning frames as
+    :data:`~vrecho.classifier.SURFACE_WEIGHTS` are: how well one frame could do were the scan and
+    the pose exact, the room's other echoes at the echo's own delay and the loudspeaker's
+    directivity all that is left."""
+    from sklearn.linear_model import LogisticRegression
+
+    rows = frames(TUNING, n, 100_000, cache)
+    return LogisticRegression(C=0.1, max_iter=5000).fit(exact(rows), [r[0].is_open for r in rows])
+
+
 def main() -> None:
     from vrecho.sim.devices import CONDITIONS
 
@@ -138,18 +175,20 @@ def main() -> None:
 
     clf = vrecho.load_classifier()
     rows = frames(CONDITIONS, a.frames, 200_000, cache)
+    oracle = bound(cache, 100)
     print(f"open/closed across the envelope: {a.frames} frames per condition, seeds 200000+ (never tuned on); "
           f"surface_m = truth + N(0, {100 * SURFACE_ERROR_M:.0f} cm)\n")
     print("| condition | tuned on | frames | open | with surface_m | EchoCNN-E | EchoCNN-A (probe unknown) | "
-          "calibration error: surface_m, E, A | another echo in the window | with surface_m, the others |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    keys = ("with", "without", "p", "y", "amb", "pe", "pa", "d", "wg", "pg", "ambg")
+          "calibration error: surface_m (a calibrated model's by chance), E, A | another echo in the window | with surface_m, the others "
+          "| at the exact distance and pose |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    keys = ("with", "without", "p", "y", "amb", "pe", "pa", "d", "wg", "pg", "ambg", "ex")
     pooled = {k: [] for k in keys}
     geometry = []
     for c in (*CONDITIONS, "all"):
         sel = rows if c == "all" else [r for r in rows if r[0].condition == c]
         if c == "all":
-            w, wo, p, y, amb, pe, pa, _, wg, pg, ambg = (np.concatenate(pooled[k]) for k in keys)
+            w, wo, p, y, amb, pe, pa, _, wg, pg, ambg, ex = (np.concatenate(pooled[k]) for k in keys)
         else:
             fr = [r[0] for r in sel]
             given = np.array([r[1] for r in sel])
@@ -166,13 +205,14 @@ def main() -> None:
             amb = np.array([r[2] for r in sel])
             ambg = np.array([crowded(r[0], r[1], r[0].mic_toward_m) for r in sel])
             d = np.array([r[0].depth_m for r in sel])
-            for k, v in zip(keys, (w, wo, p, y, amb, pe, pa, d, wg, pg, ambg)):
+            ex = oracle.predict(exact(sel)) == y
+            for k, v in zip(keys, (w, wo, p, y, amb, pe, pa, d, wg, pg, ambg, ex)):
                 pooled[k].append(v)
         clear = w[~amb].mean() if (~amb).any() else float("nan")
         tuned = "partly" if c == "all" else "no" if c in HELD_OUT else "yes"
         print(f"| {c} | {tuned} | {len(w)} | {np.mean(y):.0%} | {w.mean():.1%} | {wo.mean():.1%} "
-              f"| {np.mean((pa > 0.5) == y):.1%} | {ece(p, y):.1%}, {ece(pe, y):.1%}, {ece(pa, y):.1%} | {amb.mean():.0%} "
-              f"| {clear:.1%} |", flush=True)
+              f"| {np.mean((pa > 0.5) == y):.1%} | {ece(p, y):.1%} ({ece_floor(p):.1%}), {ece(pe, y):.1%}, {ece(pa, y):.1%} | {amb.mean():.0%} "
+              f"| {clear:.1%} | {ex.mean():.1%} |", flush=True)
         geometry.append(f"| {c} | {len(w)} | {wg.mean():.1%} | {ece(pg, y):.1%} | {ambg.mean():.0%} "
                         f"| {wg[~ambg].mean() if (~ambg).any() else float('nan'):.1%} |")
     print("\nwith the microphone's place on the device and the device's pose known (mic_toward_surface_m, "

@@ -357,12 +357,12 @@ def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images:
     return out
 
 
-SURFACE_WEIGHTS = (-0.3334, 0.0349, 0.4371, 0.4477, -0.0805, 0.0271)
+SURFACE_WEIGHTS = (-0.3942, 0.0626, 0.5264, 0.4994, -0.1106, 0.0047)
 """How :class:`~vrecho.features.PlaneEcho`'s features weigh toward closed (a logistic, with
 :data:`SURFACE_BIAS`), tuned by ``python3 benchmarks/bench_surface.py --fit --frames 100`` on 900
 frames of every condition of the envelope but AAC, 48 kHz and all-at-once (seeds 100 000 and up;
 never the benchmark's)."""
-SURFACE_BIAS = -0.8326
+SURFACE_BIAS = -0.1893
 
 
 def fuse_open(predictions) -> float:

@@ -201,6 +201,43 @@ def check_vector(x, where: str, n: int = 3, *, lo: float | None = None, hi: floa
     return v if v is not None else np.array(checked)
 
 
+def check_per_frame(value, n: int, where: str, noun: str) -> np.ndarray:
+    """``value``, metres, one for every frame or one per frame of ``n``, as an array (n,);
+    whether each is finite and in range is the caller's to check.
+
+    Parameters
+    ----------
+    value : float or array_like, shape (n,)
+        What the caller was given.
+    n : int
+        How many frames it is for.
+    where, noun : str
+        The parameter's name and what one value is ("distance"), for the error.
+
+    Returns
+    -------
+    numpy.ndarray [shape=(n,)], float64
+        A copy.
+
+    Raises
+    ------
+    VrechoError
+        Naming ``where``, for a value that is not numbers, or not one or ``n`` of them.
+
+    Examples
+    --------
+    >>> check_per_frame(1.5, 2, "surface_m", "distance")
+    array([1.5, 1.5])
+    """
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise VrechoError(f"{where}: expected metres (a number, or one per frame), got {type(value).__name__}") from None
+    if a.ndim > 1 or (a.ndim == 1 and len(a) != n):
+        raise VrechoError(f"{where}: expected one {noun}, or one per frame ({n}), got shape {a.shape}")
+    return np.broadcast_to(a, (n,)).copy()
+
+
 def check_text(x, where: str, *, choices=None, max_len: int = 100) -> str:
     """``x`` if it is a string of printable text, and one of ``choices`` where they are given.
 
