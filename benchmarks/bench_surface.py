@@ -15,16 +15,18 @@ scan's plane, off by a normal 2 cm for the walk, and the pose's, 5 mm per frame)
 fused by :func:`vrecho.classifier.fuse_open` over the first 1, 3 and 6 frames, and all 6 asked
 with the device's geometry known (``mic_toward_surface_m``, as the reconstruction asks).
 
-Per condition: frames, open/closed accuracy with ``surface_m`` (the physics), without it
-(EchoCNN-E, the shipped model, the same frames with the probe known; EchoCNN-A, the paper's
-protocol, the probe unknown), the expected calibration error of each answer's probability (10
-bins; beside the physics', what a perfectly calibrated model's would be on as many frames by
-chance: :func:`ece_floor`), and the share of frames where another echo of the room (an image source of order 1 to
+Per condition: frames, open/closed accuracy with ``surface_m`` (the physics), the expected
+calibration error of its probability (10 bins; beside it, what a perfectly calibrated model's
+would be on as many frames by chance: :func:`ece_floor`), and the share of frames where another echo of the room (an image source of order 1 to
 3 that never touches the surface: the floor, the ceiling, another wall, a corner of the
 surface's wall with one of them) arrives within the window the echo is looked for in (:func:`crowded`):
 one microphone hears delays, not directions, so those frames are bounded by physics. The last
 column bounds it: the same features read at the echo's exact path (the true distance and the
 microphone's true offset, :func:`exact`), weighed by a logistic fitted on the tuning frames.
+A second table asks the same frames without ``surface_m``: EchoCNN-E, the shipped model (the
+probe known; its device frames, ``vrecho generate --preset devices``, are of the tuning
+conditions, other seeds), its open/closed, calibration and depth on closed surfaces; EchoCNN-A
+(the paper's protocol, the probe unknown).
 
 Usage: ``python3 benchmarks/bench_surface.py [--frames 60] [--walks 20] [--fit]``; ``--fit`` tunes
 the weights on the tuning seeds and conditions and prints them (to paste into the classifier).
@@ -40,9 +42,9 @@ from multiprocessing import get_context
 
 import numpy as np
 
+from vrecho.sim.devices import TUNING
+
 HELD_OUT = ("AAC", "48 kHz", "envelope")
-TUNING = ("reference", "omni", "bottom-firing", "offset", "near floor", "near ceiling", "tilted", "transducer",
-          "limiter")
 SURFACE_ERROR_M = 0.02
 POSE_ERROR_M = 0.005
 WALK = 6
@@ -178,17 +180,16 @@ def main() -> None:
     oracle = bound(cache, 100)
     print(f"open/closed across the envelope: {a.frames} frames per condition, seeds 200000+ (never tuned on); "
           f"surface_m = truth + N(0, {100 * SURFACE_ERROR_M:.0f} cm)\n")
-    print("| condition | tuned on | frames | open | with surface_m | EchoCNN-E | EchoCNN-A (probe unknown) | "
-          "calibration error: surface_m (a calibrated model's by chance), E, A | another echo in the window | with surface_m, the others "
-          "| at the exact distance and pose |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
-    keys = ("with", "without", "p", "y", "amb", "pe", "pa", "d", "wg", "pg", "ambg", "ex")
+    print("| condition | tuned on | frames | open | with surface_m | calibration error (a calibrated model's by chance) "
+          "| another echo in the window | with surface_m, the others | at the exact distance and pose |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    keys = ("with", "without", "p", "y", "amb", "pe", "pa", "d", "wg", "pg", "ambg", "ex", "de")
     pooled = {k: [] for k in keys}
-    geometry = []
+    geometry, models = [], []
     for c in (*CONDITIONS, "all"):
         sel = rows if c == "all" else [r for r in rows if r[0].condition == c]
         if c == "all":
-            w, wo, p, y, amb, pe, pa, _, wg, pg, ambg, ex = (np.concatenate(pooled[k]) for k in keys)
+            w, wo, p, y, amb, pe, pa, d, wg, pg, ambg, ex, de = (np.concatenate(pooled[k]) for k in keys)
         else:
             fr = [r[0] for r in sel]
             given = np.array([r[1] for r in sel])
@@ -196,7 +197,9 @@ def main() -> None:
             y = np.array([f.is_open for f in fr])
             with_s = ask(clf, fr, surface_m=given)
             with_g = ask(clf, fr, surface_m=given, mic_toward_surface_m=toward)
-            pe = np.array([q.probabilities["open"] for q in ask(clf, fr)])
+            without = ask(clf, fr)
+            pe = np.array([q.probabilities["open"] for q in without])
+            de = np.array([q.depth_m for q in without])
             pa = np.array([q.probabilities["open"] for q in ask(clf, fr, emitted=None)])
             p = np.array([q.probabilities["open"] for q in with_s])
             pg = np.array([q.probabilities["open"] for q in with_g])
@@ -206,15 +209,23 @@ def main() -> None:
             ambg = np.array([crowded(r[0], r[1], r[0].mic_toward_m) for r in sel])
             d = np.array([r[0].depth_m for r in sel])
             ex = oracle.predict(exact(sel)) == y
-            for k, v in zip(keys, (w, wo, p, y, amb, pe, pa, d, wg, pg, ambg, ex)):
+            for k, v in zip(keys, (w, wo, p, y, amb, pe, pa, d, wg, pg, ambg, ex, de)):
                 pooled[k].append(v)
         clear = w[~amb].mean() if (~amb).any() else float("nan")
         tuned = "partly" if c == "all" else "no" if c in HELD_OUT else "yes"
-        print(f"| {c} | {tuned} | {len(w)} | {np.mean(y):.0%} | {w.mean():.1%} | {wo.mean():.1%} "
-              f"| {np.mean((pa > 0.5) == y):.1%} | {ece(p, y):.1%} ({ece_floor(p):.1%}), {ece(pe, y):.1%}, {ece(pa, y):.1%} | {amb.mean():.0%} "
-              f"| {clear:.1%} | {ex.mean():.1%} |", flush=True)
+        print(f"| {c} | {tuned} | {len(w)} | {np.mean(y):.0%} | {w.mean():.1%} | {ece(p, y):.1%} ({ece_floor(p):.1%}) "
+              f"| {amb.mean():.0%} | {clear:.1%} | {ex.mean():.1%} |", flush=True)
+        err = 100 * np.abs(de - d)[~y]  # a closed surface's depth; an opening has none
+        models.append(f"| {c} | {tuned} | {len(w)} | {wo.mean():.1%} | {ece(pe, y):.1%} ({ece_floor(pe):.1%}) "
+                      f"| {np.median(err):.1f} | {np.mean(err <= 10):.0%} | {np.mean((pa > 0.5) == y):.1%} | {ece(pa, y):.1%} |")
         geometry.append(f"| {c} | {len(w)} | {wg.mean():.1%} | {ece(pg, y):.1%} | {ambg.mean():.0%} "
                         f"| {wg[~ambg].mean() if (~ambg).any() else float('nan'):.1%} |")
+    print("\nwithout surface_m: EchoCNN-E (the probe known), its depth on closed surfaces; EchoCNN-A (the probe "
+          "unknown); the same frames\n")
+    print("| condition | tuned on | frames | EchoCNN-E | calibration error (by chance) | closed: depth error median, cm "
+          "| closed: within 10 cm | EchoCNN-A | calibration error |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    print("\n".join(models), flush=True)
     print("\nwith the microphone's place on the device and the device's pose known (mic_toward_surface_m, "
           "as a scan knows them): the same frames\n")
     print("| condition | frames | with surface_m | calibration error | another echo in the window | the others |")

@@ -123,8 +123,15 @@ def test_a_video_round_trip_gives_the_simulated_frames_answers(ir, tmp_path, cod
     assert len(rows) == len(expected) >= 3  # the same frames found
     for r, t, p in zip(rows, direct.seconds, expected):
         assert abs(float(r["time_s"]) - t) < 1 / 44100
-        assert (r["open"] == "True") == p.is_open and r["material"] == ("-" if p.is_open else p.material)
-        # FLAC is lossless: the same answer; AAC (what phones write) moves the depth a little
+        # FLAC is lossless: the same answer; AAC (what phones write) moves it (EchoCNN-E's open
+        # probability by up to 0.15 here), so a probability near a coin's (audio alone cannot tell
+        # glass from a mirror) may come out either side
+        tol = 0.001 if codec == "flac" else 0.25
+        assert abs(float(r["p_open"]) - p.probabilities["open"]) < tol
+        assert abs(float(r["p_mirror"]) - p.probabilities["mirror"]) < tol
+        assert (r["open"] == "True") == p.is_open
+        if not p.is_open and abs(p.probabilities["mirror"] - 0.5) > tol:
+            assert r["material"] == p.material
         assert abs(float(r["depth_m"]) - p.depth_m) < (0.001 if codec == "flac" else 0.03)
     images = np.load(tmp_path / "out" / "images.npz")["gray"]
     assert images.shape == (len(rows), 120, 160) and abs(images.mean() - gray.mean()) < 3

@@ -2,6 +2,7 @@
 
 import json
 import subprocess
+from importlib import resources
 import sys
 
 import numpy as np
@@ -147,8 +148,8 @@ def test_bad_audio_is_one_clear_error(clf, audio, fs, match):
 
 def test_surface_m_answers_open_closed_by_the_echo(clf, living_room_frames):
     """With the surface's distance (2 cm off, as a scan's plane) and the probe, open/closed is
-    the echo at that delay or none: every one of the living room's 12 frames right (EchoCNN-E
-    alone: 10), a closed surface's depth within 1 cm."""
+    the echo at that delay or none: every one of the living room's 12 frames right, a closed
+    surface's depth within 1 cm."""
     from vrecho.signals import probe
 
     frames, _, truth = living_room_frames
@@ -371,3 +372,48 @@ def _edit_manifest(folder, edit):
     m = json.loads((folder / "manifest.json").read_text())
     edit(m)
     (folder / "manifest.json").write_text(json.dumps(m))
+
+
+@pytest.mark.slow
+def test_echocnn_e_trains_on_other_devices_and_ships_into_a_bundle(tiny_dataset, tmp_path):
+    """`vrecho generate --preset devices` records other devices' frames (an interrupted folder
+    finishes to the same frames), `vrecho train --devices --base` adds them to EchoCNN-E's
+    training and validation and ships E into the base bundle, the other models kept bit for bit."""
+    from vrecho.learn.devices import generate_devices, load_devices
+
+    data = tmp_path / "devices"
+    r = run_cli("generate", "--out", data, "--preset", "devices", "--frames", 30, "--seed", 5, "--cache",
+                tmp_path / "cache", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "30 device echo frames" in r.stdout and "bottom-firing 4" in r.stdout
+    d = load_devices(data)
+    assert d["audio"].shape == (30, 44100) and d["emitted"].shape == (30, 4410)
+    assert set(d["material"]) <= {"open", "glass", "mirror"} and (d["is_open"] == (d["material"] == "open")).all()
+    again = tmp_path / "again"
+    generate_devices(again, n_frames=30, seed=5, workers=1, cache=tmp_path / "cache", progress=False)
+    (again / "chunk_0000.npz").unlink()  # as an interrupted run leaves it
+    manifest = json.loads((again / "manifest.json").read_text())
+    (again / "manifest.json").write_text(json.dumps({**manifest, "complete": False}))
+    with pytest.raises(VrechoError, match="unfinished"):
+        load_devices(again)
+    generate_devices(again, n_frames=30, seed=5, workers=1, cache=tmp_path / "cache", progress=False)
+    assert np.array_equal(load_devices(again)["audio"], d["audio"])
+    with pytest.raises(VrechoError, match="other device frames"):
+        generate_devices(again, n_frames=31, seed=5, progress=False)
+
+    run = tmp_path / "run"
+    r = run_cli("train", "--data", tiny_dataset, "--out", run, "--method", "EchoCNN-E", "--epochs", 1,
+                "--devices", data, "--base", resources.files("vrecho.assets") / "echocnn.pt", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "with 27 device frames" in r.stdout
+    assert json.loads((run / "training.json").read_text())["EchoCNN-E"]["device_frames"] == [27, 3]
+    assert json.loads((run / "run.json").read_text())["devices"] == {"seed": 5, "n_frames": 30}
+    shipped = torch.load(resources.files("vrecho.assets") / "echocnn.pt", weights_only=True)["models"]
+    mine = torch.load(run / "classifier.pt", weights_only=True)["models"]
+    for key in ("A", "AV", "EV"):
+        assert all(torch.equal(mine[key]["state"][k], v) for k, v in shipped[key]["state"].items())
+    assert not all(torch.equal(mine["E"]["state"][k], v) for k, v in shipped["E"]["state"].items())
+    assert vrecho.load_classifier(run / "classifier.pt").predict(d["audio"][0], 44100, emitted=d["emitted"][0]).model == "EchoCNN-E"
+    r = run_cli("train", "--data", tiny_dataset, "--out", tmp_path / "other", "--method", "EchoCNN-E",
+                "--devices", tmp_path / "cache", "--quiet")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "holds no device frames" in r.stderr

@@ -69,8 +69,11 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Simulate rooms, render every emitted sound and store frames, images, "
                                    "impulse responses and labels. Resumable: rerun to finish an interrupted run.")
     g.add_argument("--out", required=True, type=Path, help="dataset folder (created; must be empty or this dataset)")
-    g.add_argument("--preset", choices=("tiny", "small", "default"), default="tiny",
-                   help="dataset size: 384, 2 560 or 25 600 frames (default: tiny)")
+    g.add_argument("--preset", choices=("tiny", "small", "default", "devices"), default="tiny",
+                   help="dataset size: 384, 2 560 or 25 600 frames (default: tiny); devices: echo frames of other "
+                        "devices of the operating envelope, for `vrecho train --devices`")
+    g.add_argument("--frames", type=_whole(1, 1_000_000), default=2000,
+                   help="frames of the devices preset (default: 2000)")
     g.add_argument("--seed", type=SEED, default=0, help="random seed (default: 0)")
     g.add_argument("--workers", type=_whole(1, 256), default=None, help="processes (default: one per core)")
     g.add_argument("--cache", type=Path, default=None, help="impulse-response cache folder (default: ~/.cache/vrecho/ir)")
@@ -80,7 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--quiet", action="store_true", help="no progress bar")
     g.set_defaults(resumable=True, func=lambda a: app.generate(a.out, preset=a.preset, seed=a.seed,
                                                                workers=a.workers, cache=a.cache, force=a.force,
-                                                               progress=not a.quiet, ray=a.ray))
+                                                               progress=not a.quiet, ray=a.ray, frames=a.frames))
 
     t = sub.add_parser("train", help="train EchoCNN and every baseline on a dataset",
                        description="Train every method of the benchmark (EchoCNN variants and baselines) on a dataset "
@@ -97,11 +100,18 @@ def build_parser() -> argparse.ArgumentParser:
     cluster.add_argument(t, "train the CNNs with Ray Train (distributed data parallel)")
     t.add_argument("--workers", type=_whole(1, 1024), default=1, help="Ray Train workers (with --ray; default: 1)")
     t.add_argument("--gpus-per-worker", type=_finite, default=0.0, help="GPUs per Ray Train worker (with --ray; default: 0)")
+    t.add_argument("--devices", type=Path, default=None,
+                   help="a folder of `vrecho generate --preset devices`: other devices' echo frames added to "
+                        "EchoCNN-E's training and validation")
+    t.add_argument("--base", type=Path, default=None,
+                   help="a classifier.pt (or vrecho/assets/echocnn.pt) whose models OUT/classifier.pt keeps where "
+                        "a shipped method is not trained in OUT: one model retrained, the others as shipped")
     t.add_argument("--quiet", action="store_true", help="no progress bars")
     t.set_defaults(resumable=True, func=lambda a: app.train(a.data, a.out, methods=a.method, seed=a.seed,
                                                             epochs=a.epochs, patience=a.patience, force=a.force,
                                                             progress=not a.quiet, ray=a.ray, workers=a.workers,
-                                                            gpus_per_worker=a.gpus_per_worker))
+                                                            gpus_per_worker=a.gpus_per_worker, devices=a.devices,
+                                                            base=a.base))
 
     e = sub.add_parser("evaluate", help="the paper's tables for every trained method",
                        description="Judge every method trained in RUN on the test rooms: the paper's two tables "

@@ -5,20 +5,25 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
+from ..errors import VrechoError
 from ..learn.datasets import generate as generate_dataset
 from ..learn.datasets import open_dataset
+from ..learn.devices import generate_devices, load_devices
 
 
 def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: int | None = None, cache=None,
-             force: bool = False, progress: bool = True, ray: str | None = None) -> Path:
+             force: bool = False, progress: bool = True, ray: str | None = None, frames: int = 2000) -> Path:
     """``vrecho generate``: :func:`vrecho.learn.datasets.generate` (resumable), then what was made.
 
     Parameters
     ----------
     out : str or path
         Dataset folder; created if missing, and it must be empty or this dataset.
-    preset : {"tiny", "small", "default"}
-        Dataset size (default ``tiny``).
+    preset : {"tiny", "small", "default", "devices"}
+        Dataset size (default ``tiny``); ``devices``: other devices' echo frames
+        (:func:`vrecho.learn.devices.generate_devices`), for ``vrecho train --devices``.
     seed : int
         Everything follows from it (default 0).
     workers : int, optional
@@ -31,7 +36,9 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
         Show a progress bar.
     ray : str, optional
         Rooms as Ray tasks: ``"auto"`` (a local cluster) or a cluster's address
-        (:mod:`vrecho.learn.cluster`).
+        (:mod:`vrecho.learn.cluster`); not with ``devices``.
+    frames : int
+        Frames of the ``devices`` preset (default 2000).
 
     Returns
     -------
@@ -44,6 +51,15 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
         For an unknown preset, a negative seed, fewer than 1 worker, or an ``out`` that cannot be
         written or holds something else.
     """
+    if preset == "devices":
+        if ray is not None or force:
+            raise VrechoError(f"{'--ray' if ray is not None else '--force'}: not with the devices preset")
+        out = generate_devices(out, n_frames=frames, seed=seed, workers=workers, cache=cache, progress=progress)
+        d = load_devices(out)
+        conditions, counts = np.unique(d["condition"], return_counts=True)
+        print(f"{out}: {len(d['audio'])} device echo frames, {int(d['is_open'].sum())} open; "
+              + ", ".join(f"{c} {n}" for c, n in zip(conditions, counts)))
+        return out
     out = generate_dataset(out, preset=preset, seed=seed, workers=workers, cache=cache, progress=progress, force=force,
                            ray=ray)
     ds = open_dataset(out)
@@ -57,7 +73,7 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
 
 def train(data: str | Path, out: str | Path, *, methods=None, seed: int = 0, epochs: int = 40, patience: int = 6,
           force: bool = False, progress: bool = True, ray: str | None = None, workers: int = 1,
-          gpus_per_worker: float = 0.0) -> dict[str, dict]:
+          gpus_per_worker: float = 0.0, devices=None, base=None) -> dict[str, dict]:
     """``vrecho train``: :func:`vrecho.learn.evaluate.train_methods` (resumable), then each
     method's record; ``out/classifier.pt`` once the shipped methods are trained.
 
@@ -85,6 +101,11 @@ def train(data: str | Path, out: str | Path, *, methods=None, seed: int = 0, epo
         Ray Train workers (with ``ray``; default 1).
     gpus_per_worker : float
         GPUs per Ray Train worker (with ``ray``; default 0).
+    devices : str or path, optional
+        Other devices' echo frames (``vrecho generate --preset devices``) for EchoCNN-E.
+    base : str or path, optional
+        A classifier bundle whose models ``out/classifier.pt`` keeps where a shipped method
+        is not trained in ``out``.
 
     Returns
     -------
@@ -99,9 +120,11 @@ def train(data: str | Path, out: str | Path, *, methods=None, seed: int = 0, epo
     from ..learn.evaluate import train_methods  # torch-bound (1.7 s): only when training
 
     records = train_methods(data, out, methods=methods, seed=seed, epochs=epochs, patience=patience, progress=progress,
-                            force=force, ray=ray, workers=workers, gpus_per_worker=gpus_per_worker)
+                            force=force, ray=ray, workers=workers, gpus_per_worker=gpus_per_worker,
+                            devices=devices, base=base)
     for name, r in records.items():
         extra = f", {r['epochs']} epochs (best {r['best_epoch'] + 1})" if "epochs" in r else ""
+        extra += f", with {r['device_frames'][0]} device frames" if "device_frames" in r else ""
         print(f"{name:18s} {r['protocol']:7s} {r['n_train']:6d} train frames, {r['seconds']:7.1f} s{extra}")
     if (Path(out) / "classifier.pt").exists():
         print(f"classifier: {Path(out) / 'classifier.pt'} (vrecho.load_classifier(path) loads it)")

@@ -179,9 +179,13 @@ def _write_rows(path: Path, rows: list[dict]) -> None:
     atomic_write_text(path, buf.getvalue())
 
 
-def _worker_init() -> None:
-    # One process per core does the parallel work: libraries loaded after this (open3d's OpenMP,
-    # numba under librosa) stay single-threaded; NumPy is already loaded, and its FFTs are anyway.
+def worker_init() -> None:
+    """Set up a process of a generation pool (rooms here, device frames in :mod:`.devices`).
+
+    One process per core does the parallel work: libraries loaded after this (open3d's OpenMP,
+    numba under librosa) stay single-threaded; NumPy is already loaded, and its FFTs are anyway.
+    Ctrl-C is left to the driver.
+    """
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
         os.environ[var] = "1"
     # Ctrl-C reaches every process of the terminal's group: the driver alone answers it (one line,
@@ -287,7 +291,7 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
                 bar.update()
         else:
             with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                     initializer=_worker_init) as pool:
+                                     initializer=worker_init) as pool:
                 futures = [pool.submit(_scene_rows, out, i, preset, seed, splits[i], cache) for i in todo]
                 try:
                     for f in as_completed(futures):

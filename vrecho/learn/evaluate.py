@@ -30,12 +30,14 @@ import torch  # this module trains and judges models: torch is what it is for
 from scipy.signal import resample_poly
 from tqdm import tqdm
 
+from ..classifier import load_classifier
 from ..errors import VrechoError, check_count, read_json
 from ..features import echo_features, self_features
 from ..io import OutputFolder, atomic_write_text, ensure_writable_dir
 from ..models import HEADS, EchoCNN, FeatureBaseline, build
 from . import cluster
 from .datasets import open_dataset
+from .devices import device_inputs, load_devices_manifest
 from .report import activation_maximisation, confusion_figures, write_tables
 from .train import fit, metrics, predict_batches, targets
 
@@ -309,11 +311,11 @@ class Harness:
 
 def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, patience: int = 6,
                   progress: bool = True, force: bool = False, ray: str | None = None, workers: int = 1,
-                  gpus_per_worker: float = 0.0) -> dict[str, dict]:
+                  gpus_per_worker: float = 0.0, devices=None, base=None) -> dict[str, dict]:
     """Train every method (or those named) on a dataset, resumably, into the run folder ``out``.
 
-    A method already trained is skipped. When the methods of :data:`SHIPPED` are all trained,
-    writes ``classifier.pt`` (the classifier's weights).
+    A method already trained is skipped. When the methods of :data:`SHIPPED` are all trained (or
+    some, with ``base``), writes ``classifier.pt`` (the classifier's weights).
 
     Parameters
     ----------
@@ -338,6 +340,15 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
         Ray Train workers, 1 to 1024 (default 1; only with ``ray``).
     gpus_per_worker : float
         GPUs per Ray Train worker, 0 to 8 (default 0; only with ``ray``).
+    devices : str or path, optional
+        A folder of other devices' echo frames (:func:`.devices.generate_devices`), added to the
+        training and validation frames of the product protocol's CNNs without a camera image
+        (EchoCNN-E): the loudspeakers, microphones and heights of the operating envelope, not
+        the reference device's alone. Not with ``ray``.
+    base : str or path, optional
+        A classifier bundle (``classifier.pt``, or the package's ``vrecho/assets/echocnn.pt``)
+        whose models ``classifier.pt`` takes where a method of :data:`SHIPPED` is not trained
+        in ``out``: one model retrained, the others as shipped.
 
     Returns
     -------
@@ -349,7 +360,8 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
     ------
     VrechoError
         For an unknown method, a seed, ``epochs`` or ``patience`` out of range, a missing or
-        unfinished dataset, or an unwritable or foreign ``out``.
+        unfinished dataset or devices folder, ``devices`` with ``ray``, or an unwritable or
+        foreign ``out``.
     """
     check_count(seed, "seed", 2**32 - 1, 0)
     check_count(epochs, "epochs", 10000)
@@ -360,6 +372,11 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
     harness = Harness(data, seed=seed, progress=progress)
     m = harness.ds.manifest
     identity = {"format": "vrecho-run", "dataset": {k: m[k] for k in ("preset", "seed", "n_frames")}, "seed": seed}
+    if devices is not None:
+        if ray is not None:
+            raise VrechoError("devices: not with ray (the device frames are read here)")
+        dm = load_devices_manifest(devices)
+        identity["devices"] = {k: dm[k] for k in ("seed", "n_frames")}
     run_path = out / "run.json"
     if run_path.exists():
         old = read_json(run_path, "run", expect=dict)
@@ -390,12 +407,18 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
         elif m.kind == "cnn":
             torch.manual_seed(seed)
             model = m.model()
-            h = fit(model, tr.inputs(m.inputs), tr.y, va.inputs(m.inputs), va.y,
+            (x_tr, y_tr), (x_va, y_va) = (tr.inputs(m.inputs), tr.y), (va.inputs(m.inputs), va.y)
+            if devices is not None and m.protocol == "product" and "image" not in m.inputs:
+                x_tr, y_tr = _joined(x_tr, y_tr, *device_inputs(devices, "train", progress=progress))
+                x_va, y_va = _joined(x_va, y_va, *device_inputs(devices, "val", progress=progress))
+            h = fit(model, x_tr, y_tr, x_va, y_va,
                     epochs=min(epochs, m.max_epochs or epochs), patience=patience,
                     seed=seed, checkpoint=path.with_suffix(".ckpt"), progress=progress, desc=m.name)
             torch.save({"config": model.config, "state": model.state_dict()}, path)
             rec = {"epochs": h.epochs, "best_epoch": h.best_epoch, "val_loss": round(h.best_val_loss, 4),
                    "seconds": round(h.seconds, 1)}
+            if len(y_tr["open"]) > len(tr):
+                rec["device_frames"] = [len(y_tr["open"]) - len(tr), len(y_va["open"]) - len(va)]
         else:
             est = FeatureBaseline(m.kind, m.inputs).fit(tr.inputs(m.inputs), tr.y)
             path.write_bytes(pickle.dumps(est))
@@ -403,9 +426,15 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
         rec.update(seed=seed, n_train=len(tr), n_val=len(va), protocol=m.protocol)
         records[m.name] = rec
         atomic_write_text(records_path, json.dumps(records, indent=1))
-    if all(name in records for name in SHIPPED.values()):
-        export_classifier(out, out / "classifier.pt")
+    if all(name in records for name in SHIPPED.values()) or (
+            base is not None and any(name in records for name in SHIPPED.values())):
+        export_classifier(out, out / "classifier.pt", base=base)
     return records
+
+
+def _joined(x: dict, y: dict, x2: dict, y2: dict) -> tuple[dict, dict]:
+    """Two sets of frames' inputs and targets, one after the other (the inputs both have)."""
+    return ({k: torch.cat([x[k], x2[k]]) for k in x}, {k: torch.cat([y[k], y2[k]]) for k in y})
 
 
 def _share(harness, m: Method, rank: int, workers: int):
@@ -449,15 +478,17 @@ def load_method(run, m: Method):
     return model.eval()
 
 
-def export_classifier(run, path) -> Path:
+def export_classifier(run, path, *, base=None) -> Path:
     """Bundle the shipped methods' weights (float16, a few MB) into one file for the classifier.
 
     Parameters
     ----------
     run : str or path
-        A run folder holding every method of :data:`SHIPPED`.
+        A run folder holding every method of :data:`SHIPPED` (or some, with ``base``).
     path : str or path
-        The bundle's file (written atomically).
+        The bundle's file (written atomically; it may be ``base`` itself).
+    base : str or path, optional
+        A bundle whose models are taken where ``run`` lacks a method of :data:`SHIPPED`.
 
     Returns
     -------
@@ -466,10 +497,15 @@ def export_classifier(run, path) -> Path:
     Raises
     ------
     VrechoError
-        When a method of :data:`SHIPPED` is not trained in ``run``.
+        When a method of :data:`SHIPPED` is not trained in ``run`` (and ``base`` is None), or
+        ``base`` is not a vrecho classifier.
     """
     bundle = {}
+    kept = _bundle(base)["models"] if base is not None else {}
     for key, name in SHIPPED.items():
+        if key in kept and not method(name).path(run).exists():
+            bundle[key] = kept[key]
+            continue
         model = load_method(run, method(name))
         bundle[key] = {"name": name, "config": model.config,
                        "state": {k: v.half() if v.is_floating_point() else v for k, v in model.state_dict().items()}}
@@ -478,6 +514,12 @@ def export_classifier(run, path) -> Path:
     torch.save({"format": "vrecho-classifier", "version": 1, "models": bundle}, tmp)
     tmp.replace(path)
     return path
+
+
+def _bundle(path) -> dict:
+    """A classifier bundle's contents, checked as :func:`vrecho.load_classifier` checks it."""
+    load_classifier(path)  # one clear error for a missing, foreign or incomplete file
+    return torch.load(path, weights_only=True)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -36,6 +36,9 @@ CONDITIONS = ("reference", "omni", "bottom-firing", "offset", "near floor", "nea
 """The conditions :func:`echo_frame` draws: one property at its extreme each, all at once
 (``"envelope"``), or none (``"reference"``: the reference device, upright, at the surface's
 height)."""
+TUNING = ("reference", "omni", "bottom-firing", "offset", "near floor", "near ceiling", "tilted", "transducer", "limiter")
+"""The conditions tuning and training draw from (:data:`vrecho.classifier.SURFACE_WEIGHTS`,
+EchoCNN-E's device frames): all but AAC, 48 kHz and all at once, which the benchmarks hold out."""
 
 
 HEADROOM = 0.9

@@ -1,0 +1,217 @@
+"""Echo frames of the operating envelope's devices, for training EchoCNN-E off the reference device.
+
+The product protocol's dataset (:mod:`.datasets`) hears every room with the reference device (a
+loudspeaker firing forward, the microphone 7 cm above it, at the surface's height). Frames of
+:mod:`vrecho.sim.devices` are recorded by other devices: omnidirectional or bottom-firing
+loudspeakers, microphones 10 to 15 cm off, phones' transducers and limiters, near the floor or
+the ceiling, tilted. A folder of them (:func:`generate_devices`) is added to the product
+protocol's training and validation frames by ``vrecho train --devices`` (EchoCNN-E only: these
+frames have no camera image).
+
+A devices folder holds::
+
+    manifest.json       format, seed, frames, conditions; "complete": true once every chunk is in
+    chunk_0000.npz ...  CHUNK frames each: audio (n, 44100) float16 at 44.1 kHz from the
+                        emission, emitted (n, 4410) float32, is_open, material, depth_m, condition
+
+Frame ``i`` is drawn by ``numpy.random.default_rng([seed, i])`` under condition
+``TUNING[i % len(TUNING)]``: the same folder whatever the workers, and a rerun does only the
+chunks not yet written.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from ..errors import VrechoError, check_count, read_json
+from ..features import check_emitted, check_frames, echo_features
+from ..io import atomic_write_text, ensure_writable_dir
+from ..sim.devices import TUNING, echo_frame
+from .datasets import worker_init
+
+CHUNK = 50
+"""Frames per file: what an interrupted run loses at most, per worker."""
+FORMAT = "vrecho-devices"
+
+
+def generate_devices(out: str | Path, *, n_frames: int = 2000, seed: int = 0, workers: int | None = None,
+                     cache=None, progress: bool = True) -> Path:
+    """Generate (or finish) a folder of device echo frames.
+
+    Parameters
+    ----------
+    out : str or path
+        The folder; created if missing. One holding another seed or count is refused.
+    n_frames : int
+        Frames, 1 to 1 000 000 (default 2000), the conditions of :data:`vrecho.sim.devices.TUNING`
+        in turn (AAC, 48 kHz and all at once are left out: the benchmark's held-out rows).
+    seed : int
+        Everything follows from it (default 0; frame ``i`` draws from ``[seed, i]``, a stream
+        no benchmark's single-number seeds share).
+    workers : int, optional
+        Processes (default: one per core).
+    cache : path, optional
+        Impulse-response cache folder (:func:`vrecho.sim.acoustics.impulse_responses`).
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    pathlib.Path
+        The folder.
+
+    Raises
+    ------
+    VrechoError
+        For a count, seed or workers out of range, or an ``out`` that cannot be written or holds
+        something else.
+    """
+    n_frames = check_count(n_frames, "n_frames", 1_000_000)
+    seed = check_count(seed, "seed", 2**32 - 1, 0)
+    workers = check_count((os.cpu_count() or 1) if workers is None else workers, "workers", 256)
+    out = ensure_writable_dir(out)
+    identity = {"format": FORMAT, "seed": seed, "n_frames": n_frames, "conditions": list(TUNING)}
+    path = out / "manifest.json"
+    if path.exists():
+        old = read_json(path, "devices manifest", expect=dict)
+        if {k: old.get(k) for k in identity} != identity:
+            raise VrechoError(f"out: {out} holds other device frames (seed {old.get('seed')}, "
+                              f"{old.get('n_frames')} frames); choose an empty folder")
+        if old.get("complete"):
+            return out
+    elif any(p.name != path.name for p in out.iterdir()):
+        raise VrechoError(f"out: {out} is not empty and holds no device frames; choose an empty folder")
+    atomic_write_text(path, json.dumps({**identity, "complete": False}, indent=1))
+    chunks = [k for k in range(-(-n_frames // CHUNK)) if not (out / f"chunk_{k:04d}.npz").exists()]
+    jobs = [(out, seed, k, range(k * CHUNK, min(n_frames, (k + 1) * CHUNK)), cache) for k in chunks]
+    bar = tqdm(total=n_frames, initial=n_frames - sum(len(j[3]) for j in jobs), unit="frame", desc="device frames",
+               disable=not progress)
+    try:
+        if workers == 1 or len(jobs) <= 1:
+            for job in jobs:
+                bar.update(_chunk(*job))
+        else:
+            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                                     initializer=worker_init) as pool:
+                for f in as_completed([pool.submit(_chunk, *job) for job in jobs]):
+                    bar.update(f.result())
+    finally:
+        bar.close()
+    atomic_write_text(path, json.dumps({**identity, "complete": True}, indent=1))
+    return out
+
+
+def _chunk(out: Path, seed: int, k: int, frames: range, cache) -> int:
+    """Record frames ``frames`` and write them as chunk ``k`` (whole or not at all)."""
+    rows = [echo_frame(np.random.default_rng([seed, i]), TUNING[i % len(TUNING)], cache=cache) for i in frames]
+    arrays = {"audio": np.stack([check_frames(f.audio, f.device.fs) for f in rows]).astype(np.float16),
+              "emitted": np.stack([check_emitted(f.emitted, f.device.fs, 1) for f in rows]).astype(np.float32),
+              "is_open": np.array([f.is_open for f in rows]), "material": np.array([f.material for f in rows]),
+              "depth_m": np.array([f.depth_m for f in rows]), "condition": np.array([f.condition for f in rows])}
+    tmp = out / f".chunk_{k:04d}.tmp.npz"
+    np.savez(tmp, **arrays)
+    os.replace(tmp, out / f"chunk_{k:04d}.npz")
+    return len(rows)
+
+
+def load_devices_manifest(path: str | Path) -> dict:
+    """A finished devices folder's manifest.
+
+    Parameters
+    ----------
+    path : str or path
+
+    Returns
+    -------
+    dict
+        ``seed``, ``n_frames``, ``conditions``, ``complete``.
+
+    Raises
+    ------
+    VrechoError
+        When ``path`` holds no devices folder, or an unfinished one.
+    """
+    m = Path(path) / "manifest.json"
+    manifest = read_json(m, "devices manifest", expect=dict) if m.exists() else {}
+    if manifest.get("format") != FORMAT:
+        raise VrechoError(f"devices: {path} holds no device frames; make them with `vrecho generate --preset devices`")
+    if not manifest.get("complete"):
+        raise VrechoError(f"devices: {path} is unfinished; rerun `vrecho generate --preset devices` to finish it")
+    return manifest
+
+
+def load_devices(path: str | Path) -> dict[str, np.ndarray]:
+    """A finished devices folder's frames, every chunk in order.
+
+    Parameters
+    ----------
+    path : str or path
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        ``audio`` (N, 44100) float32, ``emitted`` (N, 4410), ``is_open``, ``material``,
+        ``depth_m``, ``condition`` (N,).
+
+    Raises
+    ------
+    VrechoError
+        What :func:`load_devices_manifest` refuses.
+    """
+    n = load_devices_manifest(path)["n_frames"]
+    parts = [np.load(Path(path) / f"chunk_{k:04d}.npz") for k in range(-(-n // CHUNK))]
+    out = {name: np.concatenate([p[name] for p in parts]) for name in parts[0].files}
+    out["audio"] = out["audio"].astype(np.float32)
+    return out
+
+
+def device_inputs(path: str | Path, split: str, *, progress: bool = False) -> tuple[dict, dict]:
+    """EchoCNN-E's inputs and targets from a devices folder: every tenth frame (from the tenth)
+    validates, the rest train.
+
+    Parameters
+    ----------
+    path : str or path
+        A finished devices folder (:func:`generate_devices`).
+    split : {"train", "val"}
+    progress : bool
+        Show a progress bar over the echo features.
+
+    Returns
+    -------
+    x : dict of str to torch.Tensor
+        ``envelope`` and ``bands`` (:func:`~vrecho.features.echo_features`).
+    y : dict of str to torch.Tensor
+        Their targets (:func:`vrecho.learn.train.targets`).
+
+    Raises
+    ------
+    VrechoError
+        For an unknown split, or what :func:`load_devices` refuses.
+    """
+    import torch  # training's: not needed to generate the frames
+
+    from .train import targets  # torch-bound, as above
+
+    if split not in ("train", "val"):
+        raise VrechoError(f"split: expected train or val, got {split!r}")
+    d = load_devices(path)
+    keep = (np.arange(len(d["audio"])) % 10 == 9) == (split == "val")
+    audio, emitted = d["audio"][keep], d["emitted"][keep]
+    n = len(audio)
+    labels = {"kind": np.full(n, "echo"), "is_open": d["is_open"][keep].astype(int), "material": d["material"][keep],
+              "depth_m": d["depth_m"][keep].astype(float), **{c: np.full(n, np.nan) for c in ("src_x", "src_y", "src_z")}}
+    env, bands = [], []
+    for i in tqdm(range(0, n, 256), desc=f"device echo features ({split})", disable=not progress, leave=False):
+        f = echo_features(audio[i:i + 256], emitted[i:i + 256])
+        env.append(f.envelope)
+        bands.append(f.bands)
+    x = {"envelope": torch.as_tensor(np.concatenate(env)), "bands": torch.as_tensor(np.concatenate(bands))}
+    return x, targets(labels, np.arange(n))
