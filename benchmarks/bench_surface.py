@@ -42,6 +42,7 @@ from multiprocessing import get_context
 
 import numpy as np
 
+from vrecho.learn.devices import calibration_error as ece
 from vrecho.sim.devices import TUNING
 
 HELD_OUT = ("AAC", "48 kHz", "envelope")
@@ -100,20 +101,6 @@ def ask(clf, frames, **kw) -> list:
         for i, p in zip(idx, clf.predict_batch(np.stack([frames[i].audio for i in idx]), fs, **part)):
             out[i] = p
     return out
-
-
-def ece(p: np.ndarray, y: np.ndarray, bins: int = 10) -> float:
-    """Expected calibration error of probabilities ``p`` of the answers ``y`` (the answer's
-    confidence against its accuracy, in equal-width bins)."""
-    conf = np.maximum(p, 1 - p)
-    right = (p > 0.5) == y
-    edges = np.linspace(0.5, 1.0, bins + 1)
-    total = 0.0
-    for lo, hi in zip(edges[:-1], edges[1:]):
-        m = (conf >= lo) & ((conf < hi) | (hi == 1.0))
-        if m.any():
-            total += m.mean() * abs(conf[m].mean() - right[m].mean())
-    return float(total)
 
 
 def ece_floor(p: np.ndarray, draws: int = 400) -> float:

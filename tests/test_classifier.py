@@ -417,3 +417,15 @@ def test_echocnn_e_trains_on_other_devices_and_ships_into_a_bundle(tiny_dataset,
     r = run_cli("train", "--data", tiny_dataset, "--out", tmp_path / "other", "--method", "EchoCNN-E",
                 "--devices", tmp_path / "cache", "--quiet")
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "holds no device frames" in r.stderr
+
+    # a test set of every condition: EchoCNN-E judged on it, each condition on its own row
+    test = generate_devices(tmp_path / "test", n_frames=12, seed=6, conditions="all", workers=1,
+                            cache=tmp_path / "cache", progress=False)
+    r = run_cli("evaluate", "--data", tiny_dataset, "--run", run, "--devices", test, "--quiet")
+    assert r.returncode == 0, r.stderr
+    table = (run / "evaluation" / "tables.md").read_text()
+    assert "## Other devices" in table and "| AAC | 1 |" in table and "| 48 kHz | 1 |" in table and "| all | 12 |" in table
+    judged = json.loads((run / "evaluation" / "metrics.json").read_text())["results"]["EchoCNN-E"]["devices"]
+    assert judged["all"]["frames"] == 12 and 0 <= judged["all"]["calibration_error"] <= 0.5
+    with pytest.raises(VrechoError, match="conditions"):
+        generate_devices(tmp_path / "x", n_frames=2, conditions="held-out", progress=False)

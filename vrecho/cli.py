@@ -74,6 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "devices of the operating envelope, for `vrecho train --devices`")
     g.add_argument("--frames", type=_whole(1, 1_000_000), default=2000,
                    help="frames of the devices preset (default: 2000)")
+    g.add_argument("--conditions", choices=("tuning", "all"), default="tuning",
+                   help="the conditions the devices preset draws in turn: those tuning and training use (default), "
+                        "or all of them, a test set for `vrecho evaluate --devices`")
     g.add_argument("--seed", type=SEED, default=0, help="random seed (default: 0)")
     g.add_argument("--workers", type=_whole(1, 256), default=None, help="processes (default: one per core)")
     g.add_argument("--cache", type=Path, default=None, help="impulse-response cache folder (default: ~/.cache/vrecho/ir)")
@@ -83,7 +86,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--quiet", action="store_true", help="no progress bar")
     g.set_defaults(resumable=True, func=lambda a: app.generate(a.out, preset=a.preset, seed=a.seed,
                                                                workers=a.workers, cache=a.cache, force=a.force,
-                                                               progress=not a.quiet, ray=a.ray, frames=a.frames))
+                                                               progress=not a.quiet, ray=a.ray, frames=a.frames,
+                                                               conditions=a.conditions))
 
     t = sub.add_parser("train", help="train EchoCNN and every baseline on a dataset",
                        description="Train every method of the benchmark (EchoCNN variants and baselines) on a dataset "
@@ -124,9 +128,12 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--seed", type=SEED, default=0, help="seed of the product protocol's probes (default: 0)")
     e.add_argument("--force", action="store_true",
                    help="write into a folder holding files vrecho evaluate did not write")
+    e.add_argument("--devices", type=Path, default=None,
+                   help="a folder of `vrecho generate --preset devices --conditions all`: EchoCNN-E judged on other "
+                        "devices too, each condition on its own row")
     e.add_argument("--quiet", action="store_true", help="no progress bars")
     e.set_defaults(func=lambda a: app.evaluate(a.data, a.run, a.out, methods=a.method, seed=a.seed,
-                                                force=a.force, progress=not a.quiet))
+                                                force=a.force, progress=not a.quiet, devices=a.devices))
 
     r = sub.add_parser("reconstruct", help="scan a scene, find its glass, mirrors and openings, and repair the scan",
                        description="The initial reconstruction (a walkthrough fused by TSDF, with the camera's glass and "

@@ -14,7 +14,8 @@ from ..learn.devices import generate_devices, load_devices
 
 
 def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: int | None = None, cache=None,
-             force: bool = False, progress: bool = True, ray: str | None = None, frames: int = 2000) -> Path:
+             force: bool = False, progress: bool = True, ray: str | None = None, frames: int = 2000,
+             conditions: str = "tuning") -> Path:
     """``vrecho generate``: :func:`vrecho.learn.datasets.generate` (resumable), then what was made.
 
     Parameters
@@ -39,6 +40,8 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
         (:mod:`vrecho.learn.cluster`); not with ``devices``.
     frames : int
         Frames of the ``devices`` preset (default 2000).
+    conditions : {"tuning", "all"}
+        The conditions the ``devices`` preset draws (:func:`vrecho.learn.devices.generate_devices`).
 
     Returns
     -------
@@ -54,7 +57,8 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
     if preset == "devices":
         if ray is not None or force:
             raise VrechoError(f"{'--ray' if ray is not None else '--force'}: not with the devices preset")
-        out = generate_devices(out, n_frames=frames, seed=seed, workers=workers, cache=cache, progress=progress)
+        out = generate_devices(out, n_frames=frames, seed=seed, conditions=conditions, workers=workers, cache=cache,
+                               progress=progress)
         d = load_devices(out)
         conditions, counts = np.unique(d["condition"], return_counts=True)
         print(f"{out}: {len(d['audio'])} device echo frames, {int(d['is_open'].sum())} open; "
@@ -132,7 +136,7 @@ def train(data: str | Path, out: str | Path, *, methods=None, seed: int = 0, epo
 
 
 def evaluate(data: str | Path, run: str | Path, out: str | Path | None = None, *, methods=None, seed: int = 0,
-             force: bool = False, progress: bool = True) -> dict[str, dict]:
+             force: bool = False, progress: bool = True, devices=None) -> dict[str, dict]:
     """``vrecho evaluate``: :func:`vrecho.learn.evaluate.evaluate` into ``out`` (``run/evaluation``
     by default), then its tables.
 
@@ -152,6 +156,8 @@ def evaluate(data: str | Path, run: str | Path, out: str | Path | None = None, *
         Write into an ``out`` holding files evaluation did not write.
     progress : bool
         Show progress bars.
+    devices : str or path, optional
+        A devices folder of every condition: EchoCNN-E judged on it per condition too.
 
     Returns
     -------
@@ -166,7 +172,8 @@ def evaluate(data: str | Path, run: str | Path, out: str | Path | None = None, *
     from ..learn.evaluate import evaluate as evaluate_methods  # torch-bound (1.7 s): only when judging
 
     out = Path(run) / "evaluation" if out is None else Path(out)
-    results = evaluate_methods(data, run, out, seed=seed, progress=progress, methods=methods, force=force)
+    results = evaluate_methods(data, run, out, seed=seed, progress=progress, methods=methods, force=force,
+                               devices=devices)
     print((out / "tables.md").read_text())
     print(f"written to {out}: tables.md, results.csv, metrics.json, confusion_*.png, "
           "activation_maximisation_depth.png")

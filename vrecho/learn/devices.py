@@ -14,9 +14,11 @@ A devices folder holds::
     chunk_0000.npz ...  CHUNK frames each: audio (n, 44100) float16 at 44.1 kHz from the
                         emission, emitted (n, 4410) float32, is_open, material, depth_m, condition
 
-Frame ``i`` is drawn by ``numpy.random.default_rng([seed, i])`` under condition
-``TUNING[i % len(TUNING)]``: the same folder whatever the workers, and a rerun does only the
-chunks not yet written.
+Frame ``i`` is drawn by ``numpy.random.default_rng([seed, i])`` under the ``i``-th condition in
+turn: the same folder whatever the workers, and a rerun does only the chunks not yet written.
+A folder of every condition (``conditions="all"``, another seed) is a test set:
+``vrecho evaluate --devices`` judges EchoCNN-E on it per condition (:func:`judge_devices`), with
+and without the surface's distance.
 """
 
 from __future__ import annotations
@@ -33,16 +35,20 @@ from tqdm import tqdm
 from ..errors import VrechoError, check_count, read_json
 from ..features import check_emitted, check_frames, echo_features
 from ..io import atomic_write_text, ensure_writable_dir
-from ..sim.devices import TUNING, echo_frame
+from ..sim.devices import CONDITIONS, TUNING, echo_frame
 from .datasets import worker_init
 
 CHUNK = 50
 """Frames per file: what an interrupted run loses at most, per worker."""
 FORMAT = "vrecho-devices"
+DRAWS = {"tuning": TUNING, "all": CONDITIONS}
+"""The conditions a folder draws in turn, by name (:func:`generate_devices`)."""
+SURFACE_ERROR_M = 0.02
+"""How far off the scan's plane is taken to be when :func:`judge_devices` asks with ``surface_m``."""
 
 
-def generate_devices(out: str | Path, *, n_frames: int = 2000, seed: int = 0, workers: int | None = None,
-                     cache=None, progress: bool = True) -> Path:
+def generate_devices(out: str | Path, *, n_frames: int = 2000, seed: int = 0, conditions: str = "tuning",
+                     workers: int | None = None, cache=None, progress: bool = True) -> Path:
     """Generate (or finish) a folder of device echo frames.
 
     Parameters
@@ -50,8 +56,11 @@ def generate_devices(out: str | Path, *, n_frames: int = 2000, seed: int = 0, wo
     out : str or path
         The folder; created if missing. One holding another seed or count is refused.
     n_frames : int
-        Frames, 1 to 1 000 000 (default 2000), the conditions of :data:`vrecho.sim.devices.TUNING`
-        in turn (AAC, 48 kHz and all at once are left out: the benchmark's held-out rows).
+        Frames, 1 to 1 000 000 (default 2000), the conditions in turn.
+    conditions : {"tuning", "all"}
+        ``tuning``: those of :data:`vrecho.sim.devices.TUNING`, for training (AAC, 48 kHz and
+        all at once left out: the benchmarks' held-out rows); ``all``: every one of
+        :data:`vrecho.sim.devices.CONDITIONS`, for a test set (``vrecho evaluate --devices``).
     seed : int
         Everything follows from it (default 0; frame ``i`` draws from ``[seed, i]``, a stream
         no benchmark's single-number seeds share).
@@ -70,14 +79,16 @@ def generate_devices(out: str | Path, *, n_frames: int = 2000, seed: int = 0, wo
     Raises
     ------
     VrechoError
-        For a count, seed or workers out of range, or an ``out`` that cannot be written or holds
-        something else.
+        For a count, seed or workers out of range, unknown ``conditions``, or an ``out`` that
+        cannot be written or holds something else.
     """
+    if conditions not in DRAWS:
+        raise VrechoError(f"conditions: expected one of {tuple(DRAWS)}, got {conditions!r}")
     n_frames = check_count(n_frames, "n_frames", 1_000_000)
     seed = check_count(seed, "seed", 2**32 - 1, 0)
     workers = check_count((os.cpu_count() or 1) if workers is None else workers, "workers", 256)
     out = ensure_writable_dir(out)
-    identity = {"format": FORMAT, "seed": seed, "n_frames": n_frames, "conditions": list(TUNING)}
+    identity = {"format": FORMAT, "seed": seed, "n_frames": n_frames, "conditions": list(DRAWS[conditions])}
     path = out / "manifest.json"
     if path.exists():
         old = read_json(path, "devices manifest", expect=dict)
@@ -90,7 +101,7 @@ def generate_devices(out: str | Path, *, n_frames: int = 2000, seed: int = 0, wo
         raise VrechoError(f"out: {out} is not empty and holds no device frames; choose an empty folder")
     atomic_write_text(path, json.dumps({**identity, "complete": False}, indent=1))
     chunks = [k for k in range(-(-n_frames // CHUNK)) if not (out / f"chunk_{k:04d}.npz").exists()]
-    jobs = [(out, seed, k, range(k * CHUNK, min(n_frames, (k + 1) * CHUNK)), cache) for k in chunks]
+    jobs = [(out, seed, k, range(k * CHUNK, min(n_frames, (k + 1) * CHUNK)), DRAWS[conditions], cache) for k in chunks]
     bar = tqdm(total=n_frames, initial=n_frames - sum(len(j[3]) for j in jobs), unit="frame", desc="device frames",
                disable=not progress)
     try:
@@ -108,9 +119,9 @@ def generate_devices(out: str | Path, *, n_frames: int = 2000, seed: int = 0, wo
     return out
 
 
-def _chunk(out: Path, seed: int, k: int, frames: range, cache) -> int:
+def _chunk(out: Path, seed: int, k: int, frames: range, conditions: tuple, cache) -> int:
     """Record frames ``frames`` and write them as chunk ``k`` (whole or not at all)."""
-    rows = [echo_frame(np.random.default_rng([seed, i]), TUNING[i % len(TUNING)], cache=cache) for i in frames]
+    rows = [echo_frame(np.random.default_rng([seed, i]), conditions[i % len(conditions)], cache=cache) for i in frames]
     arrays = {"audio": np.stack([check_frames(f.audio, f.device.fs) for f in rows]).astype(np.float16),
               "emitted": np.stack([check_emitted(f.emitted, f.device.fs, 1) for f in rows]).astype(np.float32),
               "is_open": np.array([f.is_open for f in rows]), "material": np.array([f.material for f in rows]),
@@ -215,3 +226,85 @@ def device_inputs(path: str | Path, split: str, *, progress: bool = False) -> tu
         bands.append(f.bands)
     x = {"envelope": torch.as_tensor(np.concatenate(env)), "bands": torch.as_tensor(np.concatenate(bands))}
     return x, targets(labels, np.arange(n))
+
+
+def calibration_error(p, y, bins: int = 10) -> float:
+    """Expected calibration error of open probabilities ``p`` against the truth ``y``: the
+    answer's confidence against its accuracy, in equal-width bins of confidence.
+
+    Parameters
+    ----------
+    p : array_like, shape (N,)
+        Probabilities of the positive class.
+    y : array_like, shape (N,), bool
+    bins : int
+        Bins over confidences 0.5 to 1 (default 10).
+
+    Returns
+    -------
+    float
+        From 0 (calibrated) to 0.5.
+
+    Examples
+    --------
+    >>> calibration_error([0.9, 0.9, 0.1, 0.1], [True, False, False, False])  # sure at 0.9, right 3 of 4
+    0.15
+    """
+    p, y = np.asarray(p, float), np.asarray(y, bool)
+    conf, right = np.maximum(p, 1 - p), (p > 0.5) == y
+    edges = np.linspace(0.5, 1.0, bins + 1)
+    total = 0.0
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        m = (conf >= lo) & ((conf < hi) | (hi == 1.0))
+        if m.any():
+            total += m.mean() * abs(conf[m].mean() - right[m].mean())
+    return round(float(total), 12)
+
+
+def judge_devices(model, path: str | Path, *, seed: int = 0) -> dict[str, dict]:
+    """EchoCNN-E judged on a devices folder, per condition and pooled, as the classifier asks it.
+
+    Parameters
+    ----------
+    model : EchoCNN
+        An EchoCNN-E (input ``echo``).
+    path : str or path
+        A finished devices folder (a test set: ``conditions="all"``, a seed no training used).
+    seed : int
+        Seeds the scan's error on ``surface_m``: the truth plus a normal of :data:`SURFACE_ERROR_M`.
+
+    Returns
+    -------
+    dict of str to dict
+        Per condition and ``"all"``: ``frames``, ``open_share``, ``open_acc`` and
+        ``calibration_error`` without ``surface_m``, ``depth_median_cm`` and
+        ``depth_within_10cm`` on closed surfaces, ``surface_open_acc`` and
+        ``surface_calibration_error`` with it.
+
+    Raises
+    ------
+    VrechoError
+        What :func:`load_devices` refuses.
+    """
+    from ..classifier import Classifier  # torch-bound, as above
+
+    d = load_devices(path)
+    clf = Classifier({"E": model})
+    y, depth = d["is_open"].astype(bool), d["depth_m"]
+    given = depth + np.random.default_rng([seed, 2027]).normal(0, SURFACE_ERROR_M, len(depth))
+    without = clf.predict_batch(d["audio"], 44100, emitted=d["emitted"])
+    with_s = clf.predict_batch(d["audio"], 44100, emitted=d["emitted"], surface_m=np.maximum(given, 0.05))
+    p = np.array([q.probabilities["open"] for q in without])
+    ps = np.array([q.probabilities["open"] for q in with_s])
+    err = np.abs(np.array([q.depth_m for q in without]) - depth) * 100
+    out = {}
+    for c in (*dict.fromkeys(d["condition"]), "all"):
+        m = np.ones(len(y), bool) if c == "all" else d["condition"] == c
+        closed = m & ~y
+        out[str(c)] = {"frames": int(m.sum()), "open_share": float(y[m].mean()), "open_acc": float(np.mean((p[m] > 0.5) == y[m])),
+                       "calibration_error": calibration_error(p[m], y[m]),
+                       "depth_median_cm": float(np.median(err[closed])) if closed.any() else float("nan"),
+                       "depth_within_10cm": float(np.mean(err[closed] <= 10)) if closed.any() else float("nan"),
+                       "surface_open_acc": float(np.mean((ps[m] > 0.5) == y[m])),
+                       "surface_calibration_error": calibration_error(ps[m], y[m])}
+    return out

@@ -37,7 +37,7 @@ from ..io import OutputFolder, atomic_write_text, ensure_writable_dir
 from ..models import HEADS, EchoCNN, FeatureBaseline, build
 from . import cluster
 from .datasets import open_dataset
-from .devices import device_inputs, load_devices_manifest
+from .devices import device_inputs, judge_devices, load_devices_manifest
 from .report import activation_maximisation, confusion_figures, write_tables
 from .train import fit, metrics, predict_batches, targets
 
@@ -527,7 +527,7 @@ def _bundle(path) -> dict:
 
 
 def evaluate(data, run, out, *, seed: int = 0, progress: bool = True, methods=None,
-             force: bool = False) -> dict[str, dict]:
+             force: bool = False, devices=None) -> dict[str, dict]:
     """Judge every trained method on the test frames; write tables (Markdown and CSV), confusion
     matrices and the activation-maximisation figure into ``out``.
 
@@ -543,23 +543,31 @@ def evaluate(data, run, out, *, seed: int = 0, progress: bool = True, methods=No
     force : bool
         Write into an ``out`` that holds files evaluation did not write (the policy of
         :class:`vrecho.io.OutputFolder`: its files appear at once, when all are written).
+    devices : str or path, optional
+        A devices folder of every condition (``vrecho generate --preset devices --conditions
+        all``, a seed no training used): EchoCNN-E judged on it per condition, with and without
+        the surface's distance (:func:`.devices.judge_devices`), its table in ``tables.md``.
 
     Returns
     -------
     dict of str to dict
         Per method, :func:`vrecho.learn.train.metrics` on its test frames, with
-        ``seconds_per_frame`` and ``by_group`` (the same metrics per test sound or probe).
+        ``seconds_per_frame`` and ``by_group`` (the same metrics per test sound or probe); with
+        ``devices``, EchoCNN-E's also ``devices`` (per condition).
 
     Raises
     ------
     VrechoError
-        For an unknown or untrained method, none trained in ``run``, a bad dataset or ``out``.
+        For an unknown or untrained method, none trained in ``run``, a bad dataset, devices
+        folder or ``out``, or ``devices`` where EchoCNN-E is not judged.
     """
+    if devices is not None:
+        load_devices_manifest(devices)  # before anything is judged: one clear line
     with OutputFolder(out, "evaluate", force=force) as folder:
-        return _evaluate(data, run, folder, seed, progress, methods)
+        return _evaluate(data, run, folder, seed, progress, methods, devices)
 
 
-def _evaluate(data, run, folder: OutputFolder, seed: int, progress: bool, methods) -> dict[str, dict]:
+def _evaluate(data, run, folder: OutputFolder, seed: int, progress: bool, methods, devices=None) -> dict[str, dict]:
     harness = Harness(data, seed=seed, progress=progress)
     chosen = [method(m) for m in methods] if methods else [m for m in METHODS if _trained(run, m)]
     if not chosen:
@@ -579,9 +587,14 @@ def _evaluate(data, run, folder: OutputFolder, seed: int, progress: bool, method
             keep = torch.as_tensor(te.group == g)
             groups[str(g)] = metrics({k: v[keep] for k, v in o.items()}, {k: v[keep] for k, v in te.y.items()})
         res["by_group"] = groups
+        if devices is not None and m.name == "EchoCNN-E":
+            res["devices"] = judge_devices(model, devices, seed=seed)
         results[m.name], outputs[m.name] = res, o
     meta = {"seed": seed, "data": str(data), "n": {p: {s: len(harness.frames(p, s)) for s in ("train", "val", "test")}
                                                    for p in sorted({m.protocol for m in chosen})}}
+    if devices is not None and "EchoCNN-E" not in results:
+        raise VrechoError("devices: EchoCNN-E is not judged here (train it, or name it with --method)")
+    meta["devices"] = None if devices is None else str(devices)
     shown = {m.name: load_method(run, m) for m in chosen if m.name in ("EchoCNN-A", "EchoCNN-E")}
     with folder.writing() as out:
         write_tables(results, chosen, meta, out)

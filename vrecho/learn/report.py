@@ -38,6 +38,24 @@ TABLES = {
 }
 
 
+def _devices_table(results: dict, meta: dict) -> list[str]:
+    """The lines of EchoCNN-E's table on other devices' frames (``vrecho evaluate --devices``)."""
+    judged = results.get("EchoCNN-E", {}).get("devices")
+    if not judged:
+        return []
+    lines = [f"## Other devices: EchoCNN-E on {meta['devices']} (issue 27)", "",
+             "Each condition of the operating envelope on its own row (`vrecho.sim.devices`); without the surface's "
+             "distance (the model), and with it (`surface_m`: the truth plus a normal 2 cm, the physics). Calibration "
+             "error: expected, 10 bins. Depth on closed surfaces.", "",
+             "| condition | frames | open | open/closed % | calibration error % | depth median cm | closed within 10 cm % "
+             "| with surface_m: open/closed % | calibration error % |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for c, r in judged.items():
+        lines.append(f"| {c} | {r['frames']} | {100 * r['open_share']:.0f} % | {100 * r['open_acc']:.1f} | "
+                     f"{100 * r['calibration_error']:.1f} | {r['depth_median_cm']:.1f} | {100 * r['depth_within_10cm']:.0f} | "
+                     f"{100 * r['surface_open_acc']:.1f} | {100 * r['surface_calibration_error']:.1f} |")
+    return lines + [""]
+
+
 def write_tables(results: dict, methods, meta: dict, out: Path) -> None:
     """``tables.md`` (the two paper tables per protocol and the per-sound breakdown) and
     ``results.csv`` (every metric of every method).
@@ -48,7 +66,8 @@ def write_tables(results: dict, methods, meta: dict, out: Path) -> None:
         Per method name, its metrics with ``by_group`` (:func:`evaluate`).
     methods : list of Method
     meta : dict
-        ``seed``, ``data`` and ``n`` (frames per protocol and split).
+        ``seed``, ``data`` and ``n`` (frames per protocol and split); ``devices``, the devices
+        folder EchoCNN-E's ``devices`` results were judged on, if any.
     out : pathlib.Path
     """
     names = dict(COLUMNS)
@@ -78,8 +97,9 @@ def write_tables(results: dict, methods, meta: dict, out: Path) -> None:
                      for m in ms]
             lines.append(f"| {g} | " + " | ".join(cells) + " |")
         lines.append("")
+    lines += _devices_table(results, meta)
     atomic_write_text(out / "tables.md", "\n".join(lines))
-    keys = [k for k in next(iter(results.values())) if k != "by_group"]
+    keys = [k for k in next(iter(results.values())) if k not in ("by_group", "devices")]
     with open(out / "results.csv.tmp", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["method", "protocol", "group"] + keys)
