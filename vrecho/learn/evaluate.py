@@ -572,6 +572,8 @@ def _evaluate(data, run, folder: OutputFolder, seed: int, progress: bool, method
     chosen = [method(m) for m in methods] if methods else [m for m in METHODS if _trained(run, m)]
     if not chosen:
         raise VrechoError(f"{run}: no trained methods; run `vrecho train --data {data} --out {run}` first")
+    if devices is not None and "EchoCNN-E" not in {m.name for m in chosen}:
+        raise VrechoError("devices: EchoCNN-E is not judged here (train it, or name it with --method)")
     results, outputs = {}, {}
     for m in chosen:
         te = harness.frames(m.protocol, "test")
@@ -592,8 +594,6 @@ def _evaluate(data, run, folder: OutputFolder, seed: int, progress: bool, method
         results[m.name], outputs[m.name] = res, o
     meta = {"seed": seed, "data": str(data), "n": {p: {s: len(harness.frames(p, s)) for s in ("train", "val", "test")}
                                                    for p in sorted({m.protocol for m in chosen})}}
-    if devices is not None and "EchoCNN-E" not in results:
-        raise VrechoError("devices: EchoCNN-E is not judged here (train it, or name it with --method)")
     meta["devices"] = None if devices is None else str(devices)
     shown = {m.name: load_method(run, m) for m in chosen if m.name in ("EchoCNN-A", "EchoCNN-E")}
     with folder.writing() as out:
