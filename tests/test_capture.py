@@ -210,6 +210,11 @@ def test_a_posed_capture_repairs_the_users_mesh_and_exports(posed, tmp_path):
     assert sorted((h["decision"]["state"], h["decision"]["material"]) for h in heard) == \
         [("closed", "glass"), ("closed", "mirror"), ("open", None)]
     assert {int(r["hole"]) for r in rows if r["hole"]} >= {h["id"] for h in heard}
+    # a frame facing a hole with its specular point in it is asked with the mesh's distance, as
+    # the repair asks: its open/closed is the hole's
+    state = {h["id"]: h["decision"]["state"] == "open" for h in heard}
+    asked = [r for r in rows if r["hole"] and r["model"].endswith("echo at surface_m")]
+    assert asked and all((r["open"] == "True") == state[int(r["hole"])] for r in asked if int(r["hole"]) in state)
     glass = next(h for h in heard if h["decision"]["material"] == "glass")
     assert abs(glass["decision"]["offset_m"] - 0.0) < 0.03  # wall 0 is the plane y = 0
     import open3d as o3d

@@ -16,7 +16,7 @@ from ..camera import crop_view
 from ..colmap import image_times
 from ..errors import VrechoError, check_number
 from ..io import read_mesh
-from ..reconstruct import LABELS, Reconstruction, facing, reconstruct
+from ..reconstruct import LABELS, SCAN_TOLERANCE_M, Reconstruction, facing, reconstruct, scan_distance
 from ..signals import FS, probe
 from .media import check_pictures, image_files, load_pictures, read_audio, read_video, video_images
 from .onsets import Onsets, cut_frames, find_onsets, frame_flags
@@ -168,9 +168,10 @@ def open_capture(video=None, audio=None, images=None, poses=None, mesh=None, *, 
                      labels, emitter_distance_m)
 
 
-def answers(classifier, frames: np.ndarray, emitted: np.ndarray, *, images=None, flags=None) -> list[dict]:
+def answers(classifier, frames: np.ndarray, emitted: np.ndarray, *, images=None, flags=None, surface_m=None,
+            mic_toward_surface_m=None) -> list[dict]:
     """EchoCNN's answers for frames at 44.1 kHz, the probe ``emitted`` known (and the crops
-    ``images``, if given), as ``frames.csv``'s columns.
+    ``images`` and the mesh's distance to the surface, if given), as ``frames.csv``'s columns.
 
     Parameters
     ----------
@@ -185,6 +186,10 @@ def answers(classifier, frames: np.ndarray, emitted: np.ndarray, *, images=None,
     flags : sequence of K sequences of str, optional
         What is known of each frame's recording (:func:`~.onsets.frame_flags`), for EchoCNN to
         flag the answer with (:meth:`~vrecho.classifier.Classifier.predict_batch`).
+    surface_m, mic_toward_surface_m : float, optional
+        The distance from the loudspeaker to the surface's plane and the microphone's offset
+        toward it, as the mesh and the pose give them (:func:`vrecho.reconstruct.scan_distance`):
+        open/closed then by the echo there (within :data:`vrecho.reconstruct.SCAN_TOLERANCE_M`).
 
     Returns
     -------
@@ -199,7 +204,9 @@ def answers(classifier, frames: np.ndarray, emitted: np.ndarray, *, images=None,
     VrechoError
         From EchoCNN, for frames or crops it cannot take (a silent frame, say).
     """
-    preds = classifier.predict_batch(frames, FS, images=images, emitted=emitted, flags=flags) if len(frames) else []
+    scan = {} if surface_m is None else {"surface_m": surface_m, "mic_toward_surface_m": mic_toward_surface_m,
+                                         "surface_tolerance_m": SCAN_TOLERANCE_M}
+    preds = classifier.predict_batch(frames, FS, images=images, emitted=emitted, flags=flags, **scan) if len(frames) else []
     return [{"model": p.model, "open": p.is_open, "material": "-" if p.is_open else p.material,
              "depth_m": round(float(p.depth_m), 4), "p_open": round(p.probabilities["open"], 4),
              "p_mirror": round(p.probabilities["mirror"], 4), "confidence": round(p.confidence, 4),
@@ -211,7 +218,8 @@ def analyse(rec: Recording, *, classifier=None) -> Analysis:
     (:func:`~.onsets.cut_frames`) and EchoCNN's answer to each, the probe known (EchoCNN-E);
     with poses and a mesh, each frame takes the pose of its pulse, the frames that face a hole
     of the mesh are asked again with the camera's crop around it (EchoCNN-EV, PROTOCOL.md's
-    64 x 25) and the mesh is repaired (:func:`vrecho.reconstruct.reconstruct`).
+    64 x 25) and, where the device's specular point falls in the hole, with the mesh's distance
+    to its plane (``surface_m``, :func:`vrecho.reconstruct.scan_distance`), and the mesh is repaired (:func:`vrecho.reconstruct.reconstruct`).
 
     Parameters
     ----------
@@ -274,11 +282,13 @@ def analyse(rec: Recording, *, classifier=None) -> Analysis:
         for k, v in zip(np.flatnonzero(ok), views[first:]):
             rows[k].update(x_m=round(float(v.pose[0, 3]), 4), y_m=round(float(v.pose[1, 3]), 4),
                            z_m=round(float(v.pose[2, 3]), 4))
-        for h, hole in enumerate(result.holes):  # frames facing a hole: asked again with the crop around it
+        for h, hole in enumerate(result.holes):  # frames facing a hole: asked again with the crop and the distance
             for i in facing(views, hole):
                 if i in frame_of and "hole" not in rows[frame_of[i]]:
                     crop, inside = crop_view(views[i], hole.corners())
+                    surface, toward = scan_distance(views[i], hole)
                     a = answers(classifier, frames[frame_of[i]][None], emitted,
-                                images=crop[None] if inside >= 0.98 else None, flags=[flags[frame_of[i]]])[0]
+                                images=crop[None] if inside >= 0.98 else None, flags=[flags[frame_of[i]]],
+                                surface_m=surface, mic_toward_surface_m=toward)[0]
                     rows[frame_of[i]].update(a, hole=h)
     return Analysis(onsets, frames, times, rows, frame_pictures, result)

@@ -15,12 +15,12 @@ argument (``hear``): the simulator (:mod:`vrecho.sim`) supplies it for a scene, 
 recordings for a real one. ``vrecho reconstruct`` is :func:`vrecho.app.reconstruct`.
 """
 
-from .decide import LABELS, Decision, EchoCNNOnly, EchoCNNWithScan, infer, mirror_evidence
+from .decide import LABELS, SCAN_TOLERANCE_M, Decision, EchoCNNOnly, EchoCNNWithScan, infer, mirror_evidence, scan_distance
 from .discontinuities import Hole, Plane, beyond_walls, facing, holes, seen_through, wall_planes
 from .pipeline import Reconstruction, reconstruct
 from .repair import SURFACE_COLOURS, VARIANTS, Surface, repair
 from .scan import Echoes, Scan, fuse, load_scan
 
-__all__ = ["LABELS", "SURFACE_COLOURS", "VARIANTS", "Decision", "EchoCNNOnly", "EchoCNNWithScan", "Echoes", "Hole",
+__all__ = ["LABELS", "SCAN_TOLERANCE_M", "SURFACE_COLOURS", "VARIANTS", "Decision", "EchoCNNOnly", "EchoCNNWithScan", "Echoes", "Hole",
            "Plane", "Reconstruction", "Scan", "Surface", "beyond_walls", "facing", "fuse", "holes", "infer",
-           "load_scan", "mirror_evidence", "reconstruct", "repair", "seen_through", "wall_planes"]
+           "load_scan", "mirror_evidence", "reconstruct", "repair", "scan_distance", "seen_through", "wall_planes"]

@@ -150,13 +150,8 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
             image, inside = crop_view(views[i], hole.corners())
             audio = echoes.of(i)
             pose = device_pose(views[i])
-            scan_depth = float(n @ pose.emitter + hole.plane.offset)
-            # The specular echo comes from the foot of the perpendicular: only where it falls in
-            # the hole does the echo at the wall's delay speak of the hole (else of the wall beside it).
-            foot = pose.emitter - scan_depth * n
-            foot_in_hole = bool(hole.contains(foot[None], margin_m=-0.05)[0])
-            surface = scan_depth if use_scan and foot_in_hole and 0 < scan_depth <= MAX_SURFACE_M else None
-            toward = None if surface is None else float(n @ (pose.emitter - pose.microphone))  # n points into the room
+            scan_depth, foot_in_hole, surface, toward = _scan_geometry(views[i], hole)
+            surface, toward = (surface, toward) if use_scan else (None, None)
             pred = classifier.predict(audio, echoes.fs, image=image if inside >= min_crop_inside else None,
                                       emitted=echoes.emitted, surface_m=surface, surface_tolerance_m=SCAN_TOLERANCE_M,
                                       mic_toward_surface_m=toward)
@@ -195,6 +190,40 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
                             offset if closed else None, p_closed, p_mirror, max(p_closed, 1 - p_closed),
                             "echocnn+scan" if use_scan else "echocnn", rows, evidence))
     return out
+
+
+def scan_distance(view: View, hole: Hole) -> tuple[float | None, float | None]:
+    """What the scan tells EchoCNN of a hole in one frame: the distance from the device's
+    loudspeaker to the hole's plane (``surface_m``) and its microphone's offset toward it
+    (``mic_toward_surface_m``), where the specular point, the foot of the loudspeaker's
+    perpendicular to the plane, falls in the hole (5 cm inside its edge); else (None, None):
+    the echo at the wall's delay then speaks of the wall beside the hole.
+
+    Parameters
+    ----------
+    view : :class:`~vrecho.camera.View`
+        The frame (its pose places the device: :func:`~vrecho.camera.device_pose`).
+    hole : :class:`~.discontinuities.Hole`
+
+    Returns
+    -------
+    surface_m, mic_toward_surface_m : float or None
+        Metres; both None where the foot falls outside the hole or the plane is not 0 to
+        :data:`~vrecho.features.MAX_SURFACE_M` ahead.
+    """
+    _, _, surface, toward = _scan_geometry(view, hole)
+    return surface, toward
+
+
+def _scan_geometry(view: View, hole: Hole) -> tuple[float, bool, float | None, float | None]:
+    """:func:`scan_distance`, with the signed distance to the plane and whether the foot falls in the hole."""
+    n = hole.plane.normal  # into the room
+    pose = device_pose(view)
+    depth = float(n @ pose.emitter + hole.plane.offset)
+    foot_in_hole = bool(hole.contains((pose.emitter - depth * n)[None], margin_m=-0.05)[0])
+    if not (foot_in_hole and 0 < depth <= MAX_SURFACE_M):
+        return depth, foot_in_hole, None, None
+    return depth, foot_in_hole, depth, float(n @ (pose.emitter - pose.microphone))
 
 
 def mirror_evidence(mesh, hole: Hole, walls: list[Plane], cameras: np.ndarray, *, tolerance_m: float = 0.06,
