@@ -2,6 +2,9 @@
 
 - datasets.py: ``vrecho generate``'s datasets (rooms simulated in parallel, Zarr arrays, labels,
   splits by room) and :class:`~.datasets.Dataset` to read them;
+- devices.py: echo frames of other devices of the operating envelope (``vrecho generate --preset
+  devices``), for EchoCNN-E's training (``vrecho train --devices``) and a test set of every
+  condition (``vrecho evaluate --devices``);
 - train.py: targets, losses and the resumable training loop (:func:`~.train.fit`);
 - evaluate.py: the paper's methods and baselines trained and judged side by side (``vrecho train``,
   ``vrecho evaluate``), and the classifier's weights bundled; report.py: their tables and figures;

@@ -7,7 +7,8 @@
    (:func:`holes`, free space carved by the depth frames), what lies behind them
    (:func:`beyond_walls`) and the frames that face a hole (:func:`facing`).
 3. **What each hole is** (decide.py): :func:`infer` asks EchoCNN about the frames facing it and
-   adds what the scan knows by physics; the ways to decide are the registry :data:`LABELS`.
+   adds what the scan knows by physics (:func:`scan_distance`: the hole's plane's distance, where
+   the echo is looked for); the ways to decide are the registry :data:`LABELS`.
 4. **The repair**, the paper's Algorithm 1 (repair.py, :func:`repair`).
 
 :func:`reconstruct` (pipeline.py) runs 2 to 4 on a scan. It takes what the device hears as an
