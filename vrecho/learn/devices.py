@@ -57,13 +57,13 @@ def generate_devices(out: str | Path, *, n_frames: int = 2000, seed: int = 0, co
         The folder; created if missing. One holding another seed or count is refused.
     n_frames : int
         Frames, 1 to 1 000 000 (default 2000), the conditions in turn.
+    seed : int
+        Everything follows from it (default 0; frame ``i`` draws from ``[seed, i]``, a stream
+        no benchmark's single-number seeds share).
     conditions : {"tuning", "all"}
         ``tuning``: those of :data:`vrecho.sim.devices.TUNING`, for training (AAC, 48 kHz and
         all at once left out: the benchmarks' held-out rows); ``all``: every one of
         :data:`vrecho.sim.devices.CONDITIONS`, for a test set (``vrecho evaluate --devices``).
-    seed : int
-        Everything follows from it (default 0; frame ``i`` draws from ``[seed, i]``, a stream
-        no benchmark's single-number seeds share).
     workers : int, optional
         Processes (default: one per core).
     cache : path, optional
@@ -111,8 +111,12 @@ def generate_devices(out: str | Path, *, n_frames: int = 2000, seed: int = 0, co
         else:
             with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                      initializer=worker_init) as pool:
-                for f in as_completed([pool.submit(_chunk, *job) for job in jobs]):
-                    bar.update(f.result())
+                try:
+                    for f in as_completed([pool.submit(_chunk, *job) for job in jobs]):
+                        bar.update(f.result())
+                except BaseException:  # Ctrl-C: the running chunks finish and are kept, the rest wait
+                    pool.shutdown(wait=True, cancel_futures=True)
+                    raise
     finally:
         bar.close()
     atomic_write_text(path, json.dumps({**identity, "complete": True}, indent=1))
