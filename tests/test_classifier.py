@@ -429,3 +429,9 @@ def test_echocnn_e_trains_on_other_devices_and_ships_into_a_bundle(tiny_dataset,
     assert judged["all"]["frames"] == 12 and 0 <= judged["all"]["calibration_error"] <= 0.5
     with pytest.raises(VrechoError, match="conditions"):
         generate_devices(tmp_path / "x", n_frames=2, conditions="held-out", progress=False)
+    # EchoCNN-A, the probe unknown: judged alike, nothing asked with surface_m (it needs the sound)
+    from vrecho.learn.devices import judge_devices
+    from vrecho.learn.evaluate import method
+
+    a = judge_devices(method("EchoCNN-A").model().eval(), test, emitted=False)
+    assert a["all"]["frames"] == 12 and np.isnan(a["all"]["surface_open_acc"]) and 0 <= a["all"]["open_acc"] <= 1

@@ -18,7 +18,7 @@ Frame ``i`` is drawn by ``numpy.random.default_rng([seed, i])`` under the ``i``-
 turn: the same folder whatever the workers, and a rerun does only the chunks not yet written.
 A folder of every condition (``conditions="all"``, another seed) is a test set:
 ``vrecho evaluate --devices`` judges EchoCNN-E on it per condition (:func:`judge_devices`), with
-and without the surface's distance.
+and without the surface's distance, and EchoCNN-A (the probe unknown).
 """
 
 from __future__ import annotations
@@ -265,17 +265,22 @@ def calibration_error(p, y, bins: int = 10) -> float:
     return round(float(total), 12)
 
 
-def judge_devices(model, path: str | Path, *, seed: int = 0) -> dict[str, dict]:
-    """EchoCNN-E judged on a devices folder, per condition and pooled, as the classifier asks it.
+def judge_devices(model, path: str | Path, *, seed: int = 0, emitted: bool = True) -> dict[str, dict]:
+    """A model judged on a devices folder, per condition and pooled, as the classifier asks it:
+    EchoCNN-E with the probe known (without the surface's distance and with it), or EchoCNN-A
+    without it (the paper's protocol).
 
     Parameters
     ----------
     model : EchoCNN
-        An EchoCNN-E (input ``echo``).
+        An EchoCNN-E (input ``echo``) with ``emitted``, an EchoCNN-A (``mel``) without.
     path : str or path
         A finished devices folder (a test set: ``conditions="all"``, a seed no training used).
     seed : int
         Seeds the scan's error on ``surface_m``: the truth plus a normal of :data:`SURFACE_ERROR_M`.
+    emitted : bool
+        Ask with the probe each frame emitted (default True); without it, nothing is asked with
+        ``surface_m`` (the echo at a distance needs the sound).
 
     Returns
     -------
@@ -283,7 +288,7 @@ def judge_devices(model, path: str | Path, *, seed: int = 0) -> dict[str, dict]:
         Per condition and ``"all"``: ``frames``, ``open_share``, ``open_acc`` and
         ``calibration_error`` without ``surface_m``, ``depth_median_cm`` and
         ``depth_within_10cm`` on closed surfaces, ``surface_open_acc`` and
-        ``surface_calibration_error`` with it.
+        ``surface_calibration_error`` with it (NaN without ``emitted``).
 
     Raises
     ------
@@ -293,13 +298,16 @@ def judge_devices(model, path: str | Path, *, seed: int = 0) -> dict[str, dict]:
     from ..classifier import Classifier  # torch-bound, as above
 
     d = load_devices(path)
-    clf = Classifier({"E": model})
+    clf = Classifier({"E" if emitted else "A": model})
+    sound = {"emitted": d["emitted"]} if emitted else {}
     y, depth = d["is_open"].astype(bool), d["depth_m"]
     given = depth + np.random.default_rng([seed, 2027]).normal(0, SURFACE_ERROR_M, len(depth))
-    without = clf.predict_batch(d["audio"], 44100, emitted=d["emitted"])
-    with_s = clf.predict_batch(d["audio"], 44100, emitted=d["emitted"], surface_m=np.maximum(given, 0.05))
+    without = clf.predict_batch(d["audio"], 44100, **sound)
     p = np.array([q.probabilities["open"] for q in without])
-    ps = np.array([q.probabilities["open"] for q in with_s])
+    ps = np.full(len(y), np.nan)
+    if emitted:
+        with_s = clf.predict_batch(d["audio"], 44100, surface_m=np.maximum(given, 0.05), **sound)
+        ps = np.array([q.probabilities["open"] for q in with_s])
     err = np.abs(np.array([q.depth_m for q in without]) - depth) * 100
     out = {}
     for c in (*dict.fromkeys(d["condition"]), "all"):
@@ -309,6 +317,6 @@ def judge_devices(model, path: str | Path, *, seed: int = 0) -> dict[str, dict]:
                        "calibration_error": calibration_error(p[m], y[m]),
                        "depth_median_cm": float(np.median(err[closed])) if closed.any() else float("nan"),
                        "depth_within_10cm": float(np.mean(err[closed] <= 10)) if closed.any() else float("nan"),
-                       "surface_open_acc": float(np.mean((ps[m] > 0.5) == y[m])),
-                       "surface_calibration_error": calibration_error(ps[m], y[m])}
+                       "surface_open_acc": float(np.mean((ps[m] > 0.5) == y[m])) if emitted else float("nan"),
+                       "surface_calibration_error": calibration_error(ps[m], y[m]) if emitted else float("nan")}
     return out

@@ -546,20 +546,21 @@ def evaluate(data, run, out, *, seed: int = 0, progress: bool = True, methods=No
     devices : str or path, optional
         A devices folder of every condition (``vrecho generate --preset devices --conditions
         all``, a seed no training used): EchoCNN-E judged on it per condition, with and without
-        the surface's distance (:func:`.devices.judge_devices`), its table in ``tables.md``.
+        the surface's distance, and EchoCNN-A, the probe unknown (:func:`.devices.judge_devices`),
+        their tables in ``tables.md``.
 
     Returns
     -------
     dict of str to dict
         Per method, :func:`vrecho.learn.train.metrics` on its test frames, with
         ``seconds_per_frame`` and ``by_group`` (the same metrics per test sound or probe); with
-        ``devices``, EchoCNN-E's also ``devices`` (per condition).
+        ``devices``, EchoCNN-E's and EchoCNN-A's also ``devices`` (per condition).
 
     Raises
     ------
     VrechoError
         For an unknown or untrained method, none trained in ``run``, a bad dataset, devices
-        folder or ``out``, or ``devices`` where EchoCNN-E is not judged.
+        folder or ``out``, or ``devices`` where neither EchoCNN-E nor EchoCNN-A is judged.
     """
     if devices is not None:
         load_devices_manifest(devices)  # before anything is judged: one clear line
@@ -572,8 +573,8 @@ def _evaluate(data, run, folder: OutputFolder, seed: int, progress: bool, method
     chosen = [method(m) for m in methods] if methods else [m for m in METHODS if _trained(run, m)]
     if not chosen:
         raise VrechoError(f"{run}: no trained methods; run `vrecho train --data {data} --out {run}` first")
-    if devices is not None and "EchoCNN-E" not in {m.name for m in chosen}:
-        raise VrechoError("devices: EchoCNN-E is not judged here (train it, or name it with --method)")
+    if devices is not None and not {"EchoCNN-E", "EchoCNN-A"} & {m.name for m in chosen}:
+        raise VrechoError("devices: neither EchoCNN-E nor EchoCNN-A is judged here (train one, or name it with --method)")
     results, outputs = {}, {}
     for m in chosen:
         te = harness.frames(m.protocol, "test")
@@ -589,8 +590,8 @@ def _evaluate(data, run, folder: OutputFolder, seed: int, progress: bool, method
             keep = torch.as_tensor(te.group == g)
             groups[str(g)] = metrics({k: v[keep] for k, v in o.items()}, {k: v[keep] for k, v in te.y.items()})
         res["by_group"] = groups
-        if devices is not None and m.name == "EchoCNN-E":
-            res["devices"] = judge_devices(model, devices, seed=seed)
+        if devices is not None and m.name in ("EchoCNN-E", "EchoCNN-A"):
+            res["devices"] = judge_devices(model, devices, seed=seed, emitted=m.name == "EchoCNN-E")
         results[m.name], outputs[m.name] = res, o
     meta = {"seed": seed, "data": str(data), "n": {p: {s: len(harness.frames(p, s)) for s in ("train", "val", "test")}
                                                    for p in sorted({m.protocol for m in chosen})}}

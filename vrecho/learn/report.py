@@ -39,21 +39,26 @@ TABLES = {
 
 
 def _devices_table(results: dict, meta: dict) -> list[str]:
-    """The lines of EchoCNN-E's table on other devices' frames (``vrecho evaluate --devices``)."""
-    judged = results.get("EchoCNN-E", {}).get("devices")
-    if not judged:
-        return []
-    lines = [f"## Other devices: EchoCNN-E on {meta['devices']} (issue 27)", "",
-             "Each condition of the operating envelope on its own row (`vrecho.sim.devices`); without the surface's "
-             "distance (the model), and with it (`surface_m`: the truth plus a normal 2 cm, the physics). Calibration "
-             "error: expected, 10 bins. Depth on closed surfaces.", "",
-             "| condition | frames | open | open/closed % | calibration error % | depth median cm | closed within 10 cm % "
-             "| with surface_m: open/closed % | calibration error % |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    for c, r in judged.items():
-        lines.append(f"| {c} | {r['frames']} | {100 * r['open_share']:.0f} % | {100 * r['open_acc']:.1f} | "
-                     f"{100 * r['calibration_error']:.1f} | {r['depth_median_cm']:.1f} | {100 * r['depth_within_10cm']:.0f} | "
-                     f"{100 * r['surface_open_acc']:.1f} | {100 * r['surface_calibration_error']:.1f} |")
-    return lines + [""]
+    """The lines of EchoCNN-E's and EchoCNN-A's tables on other devices' frames (``vrecho evaluate --devices``)."""
+    lines = []
+    for name, how in (("EchoCNN-E", "the probe known"), ("EchoCNN-A", "the probe unknown, the paper's protocol")):
+        judged = results.get(name, {}).get("devices")
+        if not judged:
+            continue
+        lines += [f"## Other devices: {name} on {meta['devices']}, {how} (issue 27)", "",
+                  "Each condition of the operating envelope on its own row (`vrecho.sim.devices`); without the "
+                  "surface's distance (the model), and with it (`surface_m`: the truth plus a normal 2 cm, the physics; "
+                  "it needs the probe). Calibration error: expected, 10 bins. Depth on closed surfaces.", "",
+                  "| condition | frames | open | open/closed % | calibration error % | depth median cm | closed within 10 cm % "
+                  "| with surface_m: open/closed % | calibration error % |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for c, r in judged.items():
+            surface = (f"{100 * r['surface_open_acc']:.1f} | {100 * r['surface_calibration_error']:.1f}"
+                       if r["surface_open_acc"] == r["surface_open_acc"] else "- | -")
+            lines.append(f"| {c} | {r['frames']} | {100 * r['open_share']:.0f} % | {100 * r['open_acc']:.1f} | "
+                         f"{100 * r['calibration_error']:.1f} | {r['depth_median_cm']:.1f} | {100 * r['depth_within_10cm']:.0f} | "
+                         f"{surface} |")
+        lines.append("")
+    return lines
 
 
 def write_tables(results: dict, methods, meta: dict, out: Path) -> None:
