@@ -25,6 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import resample_poly
 
 from vrecho.device import MIC_ARRAYS, DevicePose, MicArray
 from vrecho.errors import VrechoError, check_number
@@ -126,6 +127,25 @@ class Capture:
     def n_mics(self) -> int:
         """The number of microphones, M."""
         return len(self.mics)
+
+    def audio_at(self, fs: int = FS) -> np.ndarray:
+        """The recording (M, samples) at ``fs`` Hz (by default localization's own 16 kHz),
+        resampled by a polyphase filter where it was recorded at another rate; the capture's
+        own array (not a copy) where not.
+
+        Parameters
+        ----------
+        fs : int
+            The rate wanted, in Hz.
+
+        Returns
+        -------
+        numpy.ndarray [shape=(M, samples')], float
+        """
+        if fs == self.fs:
+            return self.audio
+        g = np.gcd(self.fs, fs)
+        return resample_poly(self.audio, fs // g, self.fs // g, axis=1)
 
     @property
     def center(self) -> np.ndarray:

@@ -48,7 +48,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import minimize_scalar
-from scipy.signal import resample_poly
 
 from vrecho.errors import VrechoError, check_count, check_number
 from vrecho.signals import SPEED_OF_SOUND
@@ -365,9 +364,7 @@ class Votes:
         for c in captures:
             # at localization's own rate, whatever the capture's: the band fits, and a bin keeps its
             # width and a frame its 32 ms (at 48 kHz NFFT samples were 11 ms and 94 Hz)
-            g = np.gcd(c.fs, FS)
-            audio = c.audio if c.fs == FS else resample_poly(c.audio, FS // g, c.fs // g, axis=1)
-            X = stft(audio)[:, band].astype(np.complex64)  # (M, F, T)
+            X = stft(c.audio_at(FS))[:, band].astype(np.complex64)  # (M, F, T)
             energy = (np.abs(X) ** 2).sum(axis=0)  # (F, T)
             before = np.full_like(energy, np.inf)
             before[:, ONSET_FRAMES:] = np.stack([energy[:, ONSET_FRAMES - i:energy.shape[1] - i]

@@ -324,8 +324,7 @@ def informed(capture: Capture, positions: np.ndarray, *, guard: bool = True) -> 
         return Informed(capture.audio[:1].copy(), np.ones(1, bool), np.ones(1), np.ones(1))
     fs, nfft = masknet.FS, masknet.NFFT
     n = capture.audio.shape[1]
-    g = np.gcd(capture.fs, fs)
-    audio = capture.audio if capture.fs == fs else resample_poly(capture.audio, fs // g, capture.fs // g, axis=1)
+    audio = capture.audio_at(fs)
     X = analysis(audio, nfft)
     freqs = np.fft.rfftfreq(nfft, 1 / fs)
     A = steering(capture, positions, freqs)

@@ -564,11 +564,41 @@ def load_classifier(path: str | Path | None = None) -> Classifier:
     """
     if path is None:
         with resources.as_file(resources.files("vrecho.assets") / "echocnn.pt") as p:
-            return _load(p)
+            return _load(read_bundle(p))
+    return _load(read_bundle(path))
+
+
+def read_bundle(path: str | Path) -> dict:
+    """A classifier bundle's contents as stored (``format``, ``version``, ``models``: per
+    variant its ``config``, ``state`` in float16 and, where written, ``name``), checked.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A ``classifier.pt`` (:func:`vrecho.learn.evaluate.export_classifier`).
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    VrechoError
+        If ``path`` does not exist, is not a vrecho classifier, or lacks one of the four
+        variants.
+    """
     path = Path(path)
     if not path.is_file():
         raise VrechoError(f"classifier: no such file {path}")
-    return _load(path)
+    try:
+        saved = torch.load(path, weights_only=True)
+    except Exception as e:  # a foreign or damaged file: say which
+        raise VrechoError(f"classifier: {path} is not a vrecho classifier ({type(e).__name__})") from None
+    if not isinstance(saved, dict) or saved.get("format") != "vrecho-classifier" or not isinstance(saved.get("models"), dict):
+        raise VrechoError(f"classifier: {path} is not a vrecho classifier")
+    if set(saved["models"]) != set(_NAMES):
+        raise VrechoError(f"classifier: {path} lacks models {sorted(set(_NAMES) - set(saved['models']))}")
+    return saved
 
 
 def _fused(model: torch.nn.Module) -> torch.nn.Module:
@@ -594,19 +624,12 @@ def _fused(model: torch.nn.Module) -> torch.nn.Module:
     return model
 
 
-def _load(path: Path) -> Classifier:
-    try:
-        saved = torch.load(path, weights_only=True)
-    except Exception as e:  # a foreign or damaged file: say which
-        raise VrechoError(f"classifier: {path} is not a vrecho classifier ({type(e).__name__})") from None
-    if not isinstance(saved, dict) or saved.get("format") != "vrecho-classifier":
-        raise VrechoError(f"classifier: {path} is not a vrecho classifier")
+def _load(saved: dict) -> Classifier:
+    """The classifier of a bundle's contents (:func:`read_bundle`)."""
     models, names = {}, {}
     for key, entry in saved["models"].items():
         names[key] = entry.get("name", _NAMES.get(key, key))
         model = build(entry["config"])
         model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in entry["state"].items()})
         models[key] = _fused(model.eval())
-    if set(models) != set(_NAMES):
-        raise VrechoError(f"classifier: {path} lacks models {sorted(set(_NAMES) - set(models))}")
     return Classifier(models, names=names)

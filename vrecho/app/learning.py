@@ -59,9 +59,9 @@ def generate(out: str | Path, *, preset: str = "tiny", seed: int = 0, workers: i
             raise VrechoError(f"{'--ray' if ray is not None else '--force'}: not with the devices preset")
         out = generate_devices(out, n_frames=frames, seed=seed, conditions=conditions, workers=workers, cache=cache,
                                progress=progress)
-        d = load_devices(out)
+        d = load_devices(out, fields=("is_open", "condition"))
         conditions, counts = np.unique(d["condition"], return_counts=True)
-        print(f"{out}: {len(d['audio'])} device echo frames, {int(d['is_open'].sum())} open; "
+        print(f"{out}: {len(d['condition'])} device echo frames, {int(d['is_open'].sum())} open; "
               + ", ".join(f"{c} {n}" for c, n in zip(conditions, counts)))
         return out
     out = generate_dataset(out, preset=preset, seed=seed, workers=workers, cache=cache, progress=progress, force=force,

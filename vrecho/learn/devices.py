@@ -162,18 +162,20 @@ def load_devices_manifest(path: str | Path) -> dict:
     return manifest
 
 
-def load_devices(path: str | Path) -> dict[str, np.ndarray]:
+def load_devices(path: str | Path, fields=None) -> dict[str, np.ndarray]:
     """A finished devices folder's frames, every chunk in order.
 
     Parameters
     ----------
     path : str or path
+    fields : sequence of str, optional
+        The arrays to read (default: all); a chunk's other arrays are not read.
 
     Returns
     -------
     dict of str to numpy.ndarray
         ``audio`` (N, 44100) float32, ``emitted`` (N, 4410), ``is_open``, ``material``,
-        ``depth_m``, ``condition`` (N,).
+        ``depth_m``, ``condition`` (N,), or those of ``fields``.
 
     Raises
     ------
@@ -182,54 +184,56 @@ def load_devices(path: str | Path) -> dict[str, np.ndarray]:
     """
     n = load_devices_manifest(path)["n_frames"]
     parts = [np.load(Path(path) / f"chunk_{k:04d}.npz") for k in range(-(-n // CHUNK))]
-    out = {name: np.concatenate([p[name] for p in parts]) for name in parts[0].files}
-    out["audio"] = out["audio"].astype(np.float32)
+    out = {name: np.concatenate([p[name] for p in parts]) for name in (fields or parts[0].files)}
+    if "audio" in out:
+        out["audio"] = out["audio"].astype(np.float32)
     return out
 
 
-def device_inputs(path: str | Path, split: str, *, progress: bool = False) -> tuple[dict, dict]:
-    """EchoCNN-E's inputs and targets from a devices folder: every tenth frame (from the tenth)
-    validates, the rest train.
+def device_inputs(path: str | Path, *, progress: bool = False) -> dict[str, tuple[dict, dict]]:
+    """EchoCNN-E's inputs and targets from a devices folder, read once: every tenth frame (from
+    the tenth) validates, the rest train.
 
     Parameters
     ----------
     path : str or path
         A finished devices folder (:func:`generate_devices`).
-    split : {"train", "val"}
     progress : bool
         Show a progress bar over the echo features.
 
     Returns
     -------
-    x : dict of str to torch.Tensor
-        ``envelope`` and ``bands`` (:func:`~vrecho.features.echo_features`).
-    y : dict of str to torch.Tensor
-        Their targets (:func:`vrecho.learn.train.targets`).
+    dict of str to (dict, dict)
+        For ``"train"`` and ``"val"``: the inputs, ``envelope`` and ``bands``
+        (:func:`~vrecho.features.echo_features`) as torch tensors, and their targets
+        (:func:`vrecho.learn.train.targets`).
 
     Raises
     ------
     VrechoError
-        For an unknown split, or what :func:`load_devices` refuses.
+        What :func:`load_devices` refuses.
     """
     import torch  # training's: not needed to generate the frames
 
     from .train import targets  # torch-bound, as above
 
-    if split not in ("train", "val"):
-        raise VrechoError(f"split: expected train or val, got {split!r}")
     d = load_devices(path)
-    keep = (np.arange(len(d["audio"])) % 10 == 9) == (split == "val")
-    audio, emitted = d["audio"][keep], d["emitted"][keep]
-    n = len(audio)
-    labels = {"kind": np.full(n, "echo"), "is_open": d["is_open"][keep].astype(int), "material": d["material"][keep],
-              "depth_m": d["depth_m"][keep].astype(float), **{c: np.full(n, np.nan) for c in ("src_x", "src_y", "src_z")}}
-    env, bands = [], []
-    for i in tqdm(range(0, n, 256), desc=f"device echo features ({split})", disable=not progress, leave=False):
-        f = echo_features(audio[i:i + 256], emitted[i:i + 256])
-        env.append(f.envelope)
-        bands.append(f.bands)
-    x = {"envelope": torch.as_tensor(np.concatenate(env)), "bands": torch.as_tensor(np.concatenate(bands))}
-    return x, targets(labels, np.arange(n))
+    out = {}
+    for split in ("train", "val"):
+        keep = (np.arange(len(d["audio"])) % 10 == 9) == (split == "val")
+        audio, emitted = d["audio"][keep], d["emitted"][keep]
+        n = len(audio)
+        labels = {"kind": np.full(n, "echo"), "is_open": d["is_open"][keep].astype(int),
+                  "material": d["material"][keep], "depth_m": d["depth_m"][keep].astype(float),
+                  **{c: np.full(n, np.nan) for c in ("src_x", "src_y", "src_z")}}
+        env, bands = [], []
+        for i in tqdm(range(0, n, 256), desc=f"device echo features ({split})", disable=not progress, leave=False):
+            f = echo_features(audio[i:i + 256], emitted[i:i + 256])
+            env.append(f.envelope)
+            bands.append(f.bands)
+        x = {"envelope": torch.as_tensor(np.concatenate(env)), "bands": torch.as_tensor(np.concatenate(bands))}
+        out[split] = (x, targets(labels, np.arange(n)))
+    return out
 
 
 def calibration_error(p, y, bins: int = 10) -> float:

@@ -30,7 +30,7 @@ import torch  # this module trains and judges models: torch is what it is for
 from scipy.signal import resample_poly
 from tqdm import tqdm
 
-from ..classifier import load_classifier
+from ..classifier import read_bundle
 from ..errors import VrechoError, check_count, read_json
 from ..features import echo_features, self_features
 from ..io import OutputFolder, atomic_write_text, ensure_writable_dir
@@ -409,8 +409,9 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
             model = m.model()
             (x_tr, y_tr), (x_va, y_va) = (tr.inputs(m.inputs), tr.y), (va.inputs(m.inputs), va.y)
             if devices is not None and m.protocol == "product" and "image" not in m.inputs:
-                x_tr, y_tr = _joined(x_tr, y_tr, *device_inputs(devices, "train", progress=progress))
-                x_va, y_va = _joined(x_va, y_va, *device_inputs(devices, "val", progress=progress))
+                more = device_inputs(devices, progress=progress)
+                x_tr, y_tr = _joined(x_tr, y_tr, *more["train"])
+                x_va, y_va = _joined(x_va, y_va, *more["val"])
             h = fit(model, x_tr, y_tr, x_va, y_va,
                     epochs=min(epochs, m.max_epochs or epochs), patience=patience,
                     seed=seed, checkpoint=path.with_suffix(".ckpt"), progress=progress, desc=m.name)
@@ -501,7 +502,7 @@ def export_classifier(run, path, *, base=None) -> Path:
         ``base`` is not a vrecho classifier.
     """
     bundle = {}
-    kept = _bundle(base)["models"] if base is not None else {}
+    kept = read_bundle(base)["models"] if base is not None else {}
     for key, name in SHIPPED.items():
         if key in kept and not method(name).path(run).exists():
             bundle[key] = kept[key]
@@ -514,12 +515,6 @@ def export_classifier(run, path, *, base=None) -> Path:
     torch.save({"format": "vrecho-classifier", "version": 1, "models": bundle}, tmp)
     tmp.replace(path)
     return path
-
-
-def _bundle(path) -> dict:
-    """A classifier bundle's contents, checked as :func:`vrecho.load_classifier` checks it."""
-    load_classifier(path)  # one clear error for a missing, foreign or incomplete file
-    return torch.load(path, weights_only=True)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -53,7 +53,7 @@ def _devices_table(results: dict, meta: dict) -> list[str]:
                   "| with surface_m: open/closed % | calibration error % |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for c, r in judged.items():
             surface = (f"{100 * r['surface_open_acc']:.1f} | {100 * r['surface_calibration_error']:.1f}"
-                       if r["surface_open_acc"] == r["surface_open_acc"] else "- | -")
+                       if not np.isnan(r["surface_open_acc"]) else "- | -")
             lines.append(f"| {c} | {r['frames']} | {100 * r['open_share']:.0f} % | {100 * r['open_acc']:.1f} | "
                          f"{100 * r['calibration_error']:.1f} | {r['depth_median_cm']:.1f} | {100 * r['depth_within_10cm']:.0f} | "
                          f"{surface} |")

@@ -150,7 +150,7 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
             image, inside = crop_view(views[i], hole.corners())
             audio = echoes.of(i)
             pose = device_pose(views[i])
-            scan_depth, foot_in_hole, surface, toward = _scan_geometry(views[i], hole)
+            scan_depth, foot_in_hole, surface, toward = _scan_geometry(pose, hole)
             surface, toward = (surface, toward) if use_scan else (None, None)
             pred = classifier.predict(audio, echoes.fs, image=image if inside >= min_crop_inside else None,
                                       emitted=echoes.emitted, surface_m=surface, surface_tolerance_m=SCAN_TOLERANCE_M,
@@ -211,14 +211,14 @@ def scan_distance(view: View, hole: Hole) -> tuple[float | None, float | None]:
         Metres; both None where the foot falls outside the hole or the plane is not 0 to
         :data:`~vrecho.features.MAX_SURFACE_M` ahead.
     """
-    _, _, surface, toward = _scan_geometry(view, hole)
+    _, _, surface, toward = _scan_geometry(device_pose(view), hole)
     return surface, toward
 
 
-def _scan_geometry(view: View, hole: Hole) -> tuple[float, bool, float | None, float | None]:
-    """:func:`scan_distance`, with the signed distance to the plane and whether the foot falls in the hole."""
+def _scan_geometry(pose, hole: Hole) -> tuple[float, bool, float | None, float | None]:
+    """:func:`scan_distance` of the device at ``pose``, with the signed distance to the plane and
+    whether the foot falls in the hole."""
     n = hole.plane.normal  # into the room
-    pose = device_pose(view)
     depth = float(n @ pose.emitter + hole.plane.offset)
     foot_in_hole = bool(hole.contains((pose.emitter - depth * n)[None], margin_m=-0.05)[0])
     if not (foot_in_hole and 0 < depth <= MAX_SURFACE_M):
