@@ -3,6 +3,7 @@ EchoCNN's predict, the headset monitor): nothing but VrechoError escapes, no NaN
 and no confident answer to a recording that carries none."""
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -10,6 +11,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from vrecho.errors import VrechoError
+from vrecho.signals import probe
 
 RATES = [0, -44100, 44100.5, 8000, 16000, 22050, 44100, 48000, 96000, 10 ** 9, float("nan"), True, "44100"]
 DTYPES = [np.float32, np.float64, np.int16, bool, object, complex]
@@ -125,7 +127,6 @@ def test_a_recording_without_a_pulse_train_is_one_clear_error(make):
 
 def test_pulses_played_at_random_times_are_no_train():
     from vrecho.capture import find_onsets
-    from vrecho.signals import probe
 
     rng = np.random.default_rng(0)
     x, t, s = 1e-3 * rng.standard_normal(20 * 44100), 0.1, probe()
@@ -153,7 +154,6 @@ def test_a_low_rate_recording_is_flagged_and_not_confident(clf, recording):
     import librosa
 
     from vrecho.capture import Recording, analyse
-    from vrecho.signals import probe
 
     good = analyse(Recording(recording, 44100), classifier=clf)
     assert all(r["flags"] == "" for r in good.rows) and np.median([r["confidence"] for r in good.rows]) > 0.9
@@ -203,12 +203,22 @@ def test_the_monitor_refuses_a_read_only_speaker_buffer_and_fills_an_int16_one()
             BoundaryMonitor(fs)
 
 
+def test_samples_beyond_float32_are_one_clear_error_and_no_warning(clf):
+    frame = np.zeros(44_100)
+    frame[:4410] = probe()
+    loud = frame * 1e300  # finite as float64, infinite as float32
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (the cast used to warn of its overflow, and only the first time)
+        for audio, emitted, name in ((loud, probe(), "audio"), (frame, probe().astype(np.float64) * 1e300, "emitted")):
+            with pytest.raises(VrechoError, match=f"{name}: samples beyond float32's range"):
+                clf.predict(audio, 44_100, emitted=emitted)
+
+
 # -- Properties ------------------------------------------------------------------------------------
 
 @settings(max_examples=60, deadline=3000, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(audio_arrays(), st.booleans())
 def test_predict_answers_only_what_the_audio_carries(clf, case, with_emitted):
-    from vrecho.signals import probe
 
     x, fs, kind = case
     try:
@@ -230,7 +240,6 @@ def test_predict_answers_only_what_the_audio_carries(clf, case, with_emitted):
 def test_well_formed_frames_of_no_pulse_are_not_answered_confidently(clf, fs, kind, dtype, batch, with_emitted, seed):
     import librosa
 
-    from vrecho.signals import probe
 
     rng = np.random.default_rng(seed)
     x = np.stack([as_dtype(librosa.resample(signal(kind, 44100, rng), orig_sr=44100, target_sr=fs)[:fs], dtype)
