@@ -140,6 +140,17 @@ def test_the_speaker_gets_the_probe_on_the_same_clock():
     stereo = np.zeros((256, 2))
     mon.process(np.zeros((256, 2)), stereo)  # (frames, channels) blocks, as sounddevice gives them
     assert np.array_equal(stereo[:, 0], stereo[:, 1])
+    # Blocks of 1 to 700 samples (most of them between two pulses: filled with zeros at once)
+    # play what the schedule plays at once.
+    rng = np.random.default_rng(SEED)
+    fresh = BoundaryMonitor(48000, seed=SEED).schedule
+    played, start, k = [], 0, 0
+    while start < 96000:
+        block = np.full((int(rng.integers(1, 700)), 2), np.nan)
+        k = fresh.fill(start, block, k)
+        played.append(block[:, 0])
+        start += len(block)
+    assert np.array_equal(np.concatenate(played)[:96000], BoundaryMonitor(48000, seed=SEED).schedule.block(0, 96000))
 
 
 def test_disturbed_input_is_flagged_and_survived(glass):

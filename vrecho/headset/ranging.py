@@ -151,6 +151,7 @@ class ProbeSchedule:
         self.dither = int(round(dither_s * fs))
         self.seed = int(np.random.SeedSequence(seed).generate_state(1, np.uint64)[0])
         self._recent: dict[int, tuple[int, int]] = {}
+        self._silent = (0, 0, 0)  # samples [from, to) known to hold no pulse, and the first pulse after them
 
     @property
     def length(self) -> int:
@@ -259,6 +260,9 @@ class ProbeSchedule:
         """
         out.fill(0.0)
         m, end = self.length, start + len(out)
+        silent_from, silent_to, after = self._silent
+        if silent_from <= start and end <= silent_to:  # (most small blocks: between two pulses)
+            return after
         if self.emission(k) + m <= start:
             k = self.first_at_or_after(max(start - m + 1, 0))
         while (e := self.emission(k)) < end:
@@ -266,8 +270,9 @@ class ProbeSchedule:
             seg = self.probe(k)[lo - e:hi - e]
             out[lo - start:hi - start] = seg[:, None] if out.ndim == 2 else seg
             if e + m > end:
-                break
+                return k
             k += 1
+        self._silent = (end, e, k)  # nothing sounds from this block's end to pulse k
         return k
 
 
