@@ -201,6 +201,37 @@ def check_vector(x, where: str, n: int = 3, *, lo: float | None = None, hi: floa
     return v if v is not None else np.array(checked)
 
 
+def check_float32(x: np.ndarray, name: str) -> np.ndarray:
+    """``x`` (numbers) as float32, or one :class:`VrechoError` naming ``name`` for NaN or
+    infinite samples, or samples beyond float32's range (about 3.4e38: no audio is that loud,
+    and the cast would make them infinite with only a warning).
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        Samples, floats or integers.
+    name : str
+        The argument's name, for the error.
+
+    Returns
+    -------
+    numpy.ndarray [dtype=float32]
+        A copy.
+
+    Raises
+    ------
+    VrechoError
+        As above.
+    """
+    if not np.all(np.isfinite(x)):
+        raise VrechoError(f"{name}: contains NaN or infinite samples")
+    with np.errstate(over="ignore"):
+        out = x.astype(np.float32)
+    if not np.all(np.isfinite(out)):
+        raise VrechoError(f"{name}: samples beyond float32's range (|x| > {np.finfo(np.float32).max:.1e})")
+    return out
+
+
 def check_per_frame(value, n: int, where: str, noun: str) -> np.ndarray:
     """``value``, metres, one for every frame or one per frame of ``n``, as an array (n,);
     whether each is finite and in range is the caller's to check.

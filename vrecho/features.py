@@ -26,7 +26,7 @@ import scipy.ndimage
 import scipy.signal
 
 from .device import MIC_ABOVE_EMITTER_M
-from .errors import VrechoError, check_per_frame
+from .errors import VrechoError, check_float32, check_per_frame
 from .signals import FS, SPEED_OF_SOUND, check_fs, parabolic_peaks
 
 N_FFT = 2048
@@ -77,7 +77,7 @@ def check_frames(audio, fs) -> np.ndarray:
     n = int(round(FRAME_S * fs))
     if x.shape[-1] != n:
         raise VrechoError(f"audio: a frame is {FRAME_S:g} s, {n} samples at {fs} Hz; got {x.shape[-1]}")
-    x = finite_float32(x, "audio")
+    x = check_float32(x, "audio")
     if fs != FS:
         x = librosa.resample(x, orig_sr=fs, target_sr=FS, res_type="soxr_hq", axis=-1).astype(np.float32)
         x = x[..., :FS] if x.shape[-1] >= FS else np.pad(x, [(0, 0)] * (x.ndim - 1) + [(0, FS - x.shape[-1])])
@@ -93,37 +93,6 @@ def _window() -> np.ndarray:
 def _mel_basis() -> np.ndarray:
     """librosa's mel filters, (STFT bins, mel bands) float32 (built once: 2 ms a call)."""
     return np.ascontiguousarray(librosa.filters.mel(sr=FS, n_fft=N_FFT, n_mels=N_MELS, fmax=FS / 2).T, np.float32)
-
-
-def finite_float32(x: np.ndarray, name: str) -> np.ndarray:
-    """``x`` (numbers) as float32, or one :class:`VrechoError` naming ``name`` for NaN or
-    infinite samples, or samples beyond float32's range (about 3.4e38: no audio is that loud,
-    and the cast would make them infinite with only a warning).
-
-    Parameters
-    ----------
-    x : numpy.ndarray
-        Samples, floats or integers.
-    name : str
-        The argument's name, for the error.
-
-    Returns
-    -------
-    numpy.ndarray [dtype=float32]
-        A copy.
-
-    Raises
-    ------
-    VrechoError
-        As above.
-    """
-    if not np.all(np.isfinite(x)):
-        raise VrechoError(f"{name}: contains NaN or infinite samples")
-    with np.errstate(over="ignore"):
-        out = x.astype(np.float32)
-    if not np.all(np.isfinite(out)):
-        raise VrechoError(f"{name}: samples beyond float32's range (|x| > {np.finfo(np.float32).max:.1e})")
-    return out
 
 
 def check_emitted(emitted, fs, n_frames: int | None = None) -> np.ndarray:
@@ -163,7 +132,7 @@ def check_emitted(emitted, fs, n_frames: int | None = None) -> np.ndarray:
     if s.dtype.kind not in "fiu" or s.ndim not in (1, 2) or (s.ndim == 2 and len(s) != n_frames):
         per_frame = "" if n_frames is None else f" or one per frame ({n_frames}, k)"
         raise VrechoError(f"emitted: expected one sound (k,){per_frame}, got shape {s.shape}")
-    s = finite_float32(s, "emitted")
+    s = check_float32(s, "emitted")
     if s.shape[-1] > round(FRAME_S * fs):
         raise VrechoError(f"emitted: longer than a 1 s frame ({s.shape[-1]} samples at {fs} Hz)")
     if np.any(np.abs(s).max(axis=-1) == 0):
