@@ -42,7 +42,7 @@ seed (a faint tick), and:
    A surface that closes at under half the wearer's pace (the fastest any surface heard nears
    or recedes, over the last second or so) lies far to the side: a wall converged on at 10
    degrees while walking through a door, a metre away. Its time to contact cautions, not its
-   distance.
+   distance, and only under three quarters of ``caution_ttc_s``.
 
 The alert is the gravest any surface in the way calls for (the soonest to contact among equals),
 judged again whenever something it rests on changes: a pulse's window completes, a surface's
@@ -520,9 +520,8 @@ class BoundaryMonitor:
         due = lock.due(k)
         ready = env.ready()
         if ready > due + self._env.m:
-            # A surface in the way near a threshold: its echo of this pulse may cross it. Looked
-            # for in the block in which that echo ends (as predicted, give or take 1.5 ms, a
-            # quarter metre), not in every block.
+            # A surface near a threshold: its echo of this pulse may cross it; looked for in the
+            # block that echo ends in (as predicted, +/- 1.5 ms), not in every block.
             margin = 0.0015 * self.fs
             judged = self._judged - self._env.m - GUARD + 1  # the envelope ready at the last judgement
             if self._ends_for != k:  # asked once a pulse: the tracks change only when a pulse is committed
@@ -531,8 +530,7 @@ class BoundaryMonitor:
                 env.skip(int(due) - lock.guard - 4)
                 env.compute(ready, code=sch.code(k))
                 partial = self._echoes.find(env, due, ready, code=sch.code(k), clipped=self._clipped_at > due - 8192)
-        # The judgement changes with the tracks, a pulse still arriving, when a surface's approach
-        # grows a second old, or as the wearer walks on toward a threshold: otherwise it stands.
+        # Judged again on new tracks, a pulse arriving, an approach a second old, or a threshold near.
         t_now = self._now / self.fs
         if changed or partial or t_now >= self._judge_at or t_now - self._oldest_approach > 1.0 \
                 or "unlocked" in self._verdict.flags:
@@ -560,9 +558,9 @@ class BoundaryMonitor:
                 reach = closing * period_s + 0.05
                 thresholds = (self.stop_m, self.stop_m + h) + ((self.caution_m, self.caution_m + h) if tr.ahead else ())
                 near = any(abs(d_now - thr) < reach for thr in thresholds)
-                if tr.ahead and closing > 0.05:
-                    near = near or abs(d_now / closing - self.caution_ttc_s) < period_s + 0.05 \
-                        or abs(d_now / closing - 1.1 * self.caution_ttc_s) < period_s + 0.05
+                if tr.ahead and closing > 0.05:  # (the thresholds of a surface ahead and of one aside)
+                    near = near or any(abs(d_now / closing - f * self.caution_ttc_s) < period_s + 0.05
+                                       for f in (1.0, 1.1, _ASIDE_TTC, 1.1 * _ASIDE_TTC))
                 if near:
                     out.append(lag)
         return out
@@ -598,8 +596,7 @@ class BoundaryMonitor:
             was, tr.ahead = tr.ahead, None
             closing = -(tr.speed or 0.0)
             soon = tr.d_hat < self.caution_m + 0.5 or (closing > 0.05 and tr.d_hat / closing < self.caution_ttc_s + 0.75)
-            # The fit only where an alert may come within half a second or so, and only for a
-            # surface (stray peaks, another headset's pings, can make a track too: its score).
+            # The fit only where an alert may come within half a second or so, for a surface (score).
             if t - tr.approached_at <= 1.0 and soon and tr.confirmed:
                 tr.ahead = tr.in_the_way(self.miss_m)
                 if tr.ahead and tr.explained_by(still):
@@ -615,12 +612,12 @@ class BoundaryMonitor:
         """The alert a surface at ``d`` m, ``ttc`` s from contact calls for, with hysteresis
         (an alert ends only ``hysteresis_m`` beyond its threshold); one ``aside`` (far off the
         wearer's way: it closes at under half the pace of the surfaces ahead) cautions by its
-        time to contact only, not by its distance."""
+        time to contact only (under :data:`_ASIDE_TTC` of ``caution_ttc_s``), not by its distance."""
         h = self.hysteresis_m
         if d < self.stop_m + (h if self._level == "stop" else 0.0):
             return "stop"
         if ((d < self.caution_m + (h if self._level != "clear" else 0.0) and not aside)
-                or ttc < self.caution_ttc_s * (1.1 if self._level != "clear" else 1.0)):
+                or ttc < self.caution_ttc_s * (_ASIDE_TTC if aside else 1.0) * (1.1 if self._level != "clear" else 1.0)):
             return "caution"
         return "clear"
 
@@ -636,12 +633,9 @@ class BoundaryMonitor:
                     provisional[id(tr)] = d
         self._oldest_approach = np.inf
         self._judge_at = np.inf
-        # The wearer's pace, at least: the fastest any surface heard for a while nears or
-        # recedes (the wall behind recedes as fast as the wall ahead nears; as it was over the
-        # last second or so: slowing down at a door does not make the walls beside it ahead). A
-        # wall the wearer converges on at 10 degrees, a metre to the side (walking through a
-        # door), closes at a fifth of it: its time to contact tells whether it is in the way
-        # soon, not its distance.
+        # The wearer's pace, at least: the fastest any surface heard for a while nears or recedes
+        # (the wall behind recedes as the wall ahead nears; over the last second or so). A wall
+        # converged on at 10 degrees closes at a fifth of it: aside (see _level_for).
         pace = max((abs(tr.speed) for tr in self._tracks if tr.speed is not None and tr.confirmed and len(tr.times) >= 8
                     and t_pulse - tr.times[-1] < 0.4), default=0.0)  # (pulse times: the round trip ago)
         self._pace = pace = max(pace, self._pace - (t_now - self._paced_at))  # (forgotten at 1 m/s a second)
@@ -655,10 +649,11 @@ class BoundaryMonitor:
             closing = -v if v is not None else 0.0
             d_now = d - max(closing, 0.0) * self._stale_s(at)  # where the wearer may be by now
             ttc = d_now / closing if closing > 0.05 else np.inf
+            aside = closing < 0.5 * pace
             if t_now - tr.approached_at <= 1.0 and (tr.ahead or (
                     id(tr) in provisional and tr.ahead_with(t_pulse, provisional[id(tr)], self.miss_m, self._still))):
                 self._oldest_approach = min(self._oldest_approach, tr.approached_at)
-                level = self._level_for(d_now, ttc, closing < 0.5 * pace)
+                level = self._level_for(d_now, ttc, aside)
             elif (len(tr.times) >= 5 and closing >= 0.5 and at - tr.times[-5] < 0.25 and tr.score >= _LOOMING
                   and d < self.caution_m and d / closing < 0.75 and tr.straight(8) < 0.005):
                 # Not yet known to be in the way (the fit needs a third of a second of steady walking),
@@ -672,7 +667,8 @@ class BoundaryMonitor:
                 continue  # not known to be in the way (asked again with the echo still arriving, if any)
             if closing > 0.05:  # when, walking on, it reaches a threshold it has not reached
                 soon = [(d_now - thr) / closing for thr in (self.stop_m, self.caution_m) if d_now > thr]
-                soon.append(ttc - self.caution_ttc_s if ttc > self.caution_ttc_s else np.inf)
+                ttc_caution = self.caution_ttc_s * (_ASIDE_TTC if aside else 1.0)
+                soon.append(ttc - ttc_caution if ttc > ttc_caution else np.inf)
                 self._judge_at = min(self._judge_at, t_now + max(min(soon), 0.0))
             if best is None or (-_RANK[level], ttc, d) < (-_RANK[best[5]], best[2], best[0]):  # gravest, then soonest
                 best = (d, closing, ttc, tr, at, level)
@@ -692,6 +688,10 @@ class BoundaryMonitor:
 
 _RANK = {"clear": 0, "caution": 1, "stop": 2}
 _TRUE = np.ones(8192, bool)  # every sample sound: the usual block's mask, never written to
+_ASIDE_TTC = 0.75
+"""The share of ``caution_ttc_s`` at which a surface aside cautions (a wall met at under 30
+degrees: reckoned straight on, its contact assumes the wearer keeps grazing toward it; seed
+11000 cautioned at 1.94 s of a side wall 0.7 m away, the wearer 7 cm from a door's plane)."""
 _LOOMING = 12.0
 """The track score (its echoes' log-likelihood ratio against stray peaks) from which a surface nearing
 fast and close cautions before the fit says it is in the way."""
