@@ -219,7 +219,6 @@ def test_samples_beyond_float32_are_one_clear_error_and_no_warning(clf):
 @settings(max_examples=60, deadline=3000, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(audio_arrays(), st.booleans())
 def test_predict_answers_only_what_the_audio_carries(clf, case, with_emitted):
-
     x, fs, kind = case
     try:
         preds = clf.predict_batch(x, fs, emitted=probe() if with_emitted else None) if x.ndim == 2 else \
@@ -239,7 +238,6 @@ def test_predict_answers_only_what_the_audio_carries(clf, case, with_emitted):
        st.sampled_from([np.float32, np.float64, np.int16]), st.integers(1, 3), st.booleans(), st.integers(0, 2 ** 16))
 def test_well_formed_frames_of_no_pulse_are_not_answered_confidently(clf, fs, kind, dtype, batch, with_emitted, seed):
     import librosa
-
 
     rng = np.random.default_rng(seed)
     x = np.stack([as_dtype(librosa.resample(signal(kind, 44100, rng), orig_sr=44100, target_sr=fs)[:fs], dtype)

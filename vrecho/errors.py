@@ -223,11 +223,11 @@ def check_float32(x: np.ndarray, name: str) -> np.ndarray:
     VrechoError
         As above.
     """
-    if not np.all(np.isfinite(x)):
-        raise VrechoError(f"{name}: contains NaN or infinite samples")
     with np.errstate(over="ignore"):
         out = x.astype(np.float32)
-    if not np.all(np.isfinite(out)):
+    if not np.all(np.isfinite(out)):  # (one pass over the samples that pass: the cause only on failure)
+        if not np.all(np.isfinite(x)):
+            raise VrechoError(f"{name}: contains NaN or infinite samples")
         raise VrechoError(f"{name}: samples beyond float32's range (|x| > {np.finfo(np.float32).max:.1e})")
     return out
 

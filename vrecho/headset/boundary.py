@@ -538,16 +538,16 @@ class BoundaryMonitor:
         self._judged = self._now
 
     def _echo_ends(self, k: int) -> list[float]:
-        """For each surface in the way (or not yet known not to be: near the stop only) whose
-        echo of pulse ``k`` may take the alert across a threshold (its distance, by the time the
-        echo is in, within a pulse's walk and 5 cm of one; or its time to contact within a
-        pulse and 50 ms of the caution's): the lag of that echo, in samples after the direct
-        sound."""
+        """For each surface in the way (or not yet known not to be: near the stop only) whose echo of
+        pulse ``k`` may take the alert across a threshold (its distance, by the time the echo is in,
+        within a pulse's walk and 5 cm of one; or its time to contact within a pulse and 50 ms of
+        a caution's, ahead or aside): the lag of that echo, in samples after the direct sound."""
         out = []
         t = self.schedule.emission(k) / self.fs
         due = self._lock.due(k)
         h = self.hysteresis_m
         period_s = self.period / self.fs
+        ttc_thresholds = [f * self._caution_ttc(aside) for aside in (False, True) for f in (1.0, 1.1)]
         for tr in self._tracks:
             if t - tr.approached_at <= 1.0 and (tr.ahead or (tr.ahead is None and len(tr.times) >= 7
                                                              and tr.confirmed)):
@@ -558,9 +558,8 @@ class BoundaryMonitor:
                 reach = closing * period_s + 0.05
                 thresholds = (self.stop_m, self.stop_m + h) + ((self.caution_m, self.caution_m + h) if tr.ahead else ())
                 near = any(abs(d_now - thr) < reach for thr in thresholds)
-                if tr.ahead and closing > 0.05:  # (the thresholds of a surface ahead and of one aside)
-                    near = near or any(abs(d_now / closing - f * self.caution_ttc_s) < period_s + 0.05
-                                       for f in (1.0, 1.1, _ASIDE_TTC, 1.1 * _ASIDE_TTC))
+                if tr.ahead and closing > 0.05:
+                    near = near or any(abs(d_now / closing - thr) < period_s + 0.05 for thr in ttc_thresholds)
                 if near:
                     out.append(lag)
         return out
@@ -608,16 +607,20 @@ class BoundaryMonitor:
         if len(self._tracks) > 32:  # clutter: keep the likeliest surfaces, then the nearest
             self._tracks = sorted(self._tracks, key=lambda tr: (-tr.score, tr.dists[-1]))[:32]
 
+    def _caution_ttc(self, aside: bool) -> float:
+        """The time to contact under which a surface cautions (an ``aside`` one: :data:`_ASIDE_TTC` of it)."""
+        return self.caution_ttc_s * (_ASIDE_TTC if aside else 1.0)
+
     def _level_for(self, d: float, ttc: float, aside: bool = False) -> str:
         """The alert a surface at ``d`` m, ``ttc`` s from contact calls for, with hysteresis
         (an alert ends only ``hysteresis_m`` beyond its threshold); one ``aside`` (far off the
         wearer's way: it closes at under half the pace of the surfaces ahead) cautions by its
-        time to contact only (under :data:`_ASIDE_TTC` of ``caution_ttc_s``), not by its distance."""
+        time to contact only (:meth:`_caution_ttc`), not by its distance."""
         h = self.hysteresis_m
         if d < self.stop_m + (h if self._level == "stop" else 0.0):
             return "stop"
         if ((d < self.caution_m + (h if self._level != "clear" else 0.0) and not aside)
-                or ttc < self.caution_ttc_s * (_ASIDE_TTC if aside else 1.0) * (1.1 if self._level != "clear" else 1.0)):
+                or ttc < self._caution_ttc(aside) * (1.1 if self._level != "clear" else 1.0)):
             return "caution"
         return "clear"
 
@@ -667,7 +670,7 @@ class BoundaryMonitor:
                 continue  # not known to be in the way (asked again with the echo still arriving, if any)
             if closing > 0.05:  # when, walking on, it reaches a threshold it has not reached
                 soon = [(d_now - thr) / closing for thr in (self.stop_m, self.caution_m) if d_now > thr]
-                ttc_caution = self.caution_ttc_s * (_ASIDE_TTC if aside else 1.0)
+                ttc_caution = self._caution_ttc(aside)
                 soon.append(ttc - ttc_caution if ttc > ttc_caution else np.inf)
                 self._judge_at = min(self._judge_at, t_now + max(min(soon), 0.0))
             if best is None or (-_RANK[level], ttc, d) < (-_RANK[best[5]], best[2], best[0]):  # gravest, then soonest
@@ -688,10 +691,7 @@ class BoundaryMonitor:
 
 _RANK = {"clear": 0, "caution": 1, "stop": 2}
 _TRUE = np.ones(8192, bool)  # every sample sound: the usual block's mask, never written to
-_ASIDE_TTC = 0.75
-"""The share of ``caution_ttc_s`` at which a surface aside cautions (a wall met at under 30
-degrees: reckoned straight on, its contact assumes the wearer keeps grazing toward it; seed
-11000 cautioned at 1.94 s of a side wall 0.7 m away, the wearer 7 cm from a door's plane)."""
+_ASIDE_TTC = 0.75  # (of caution_ttc_s, for a surface aside: a wall met at under 30 degrees, grazed)
 _LOOMING = 12.0
 """The track score (its echoes' log-likelihood ratio against stray peaks) from which a surface nearing
 fast and close cautions before the fit says it is in the way."""
