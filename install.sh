@@ -23,5 +23,5 @@ python3 -m pip install -q --disable-pip-version-check torch==2.13.0
 python3 -m pip install -q --disable-pip-version-check -e ".${extras}"
 if command -v pyenv >/dev/null; then pyenv rehash; fi
 # The headset call's compiled kernels, made once here (some 10 s) and cached: never in an audio callback.
-python3 -c "from vrecho.headset.kernels import compile_kernels; compile_kernels()"
+python3 -c "from vrecho.headset import BoundaryMonitor; BoundaryMonitor()"  # (its kernels and faint.py's)
 echo "vrecho installed: $(command -v vrecho || echo 'python3 -m vrecho')"

@@ -3,8 +3,9 @@
 - :class:`BoundaryMonitor` (boundary.py): the echo ranging of a full-duplex audio callback, its
   alerts (:class:`Alert`, alert.py) and their hysteresis; the surfaces it follows are
   :class:`~.tracks.Track` (tracks.py); its probe, when it plays it, and the microphone's envelope
-  are ranging.py's, the echoes in it echoes.py's, the lock on its own round trip roundtrip.py's,
-  the per-pulse work compiled (numba) kernels.py's.
+  are ranging.py's, the echoes in it echoes.py's (and those too faint for one pulse, summed
+  along the wearer's approach over eight, faint.py's), the lock on its own round trip
+  roundtrip.py's, the per-pulse work compiled (numba) kernels.py's.
 - :func:`look` (view.py): what the headset's camera says of a surface an echo found (wall, glass
   or mirror), shown to the monitor with :meth:`BoundaryMonitor.see`.
 

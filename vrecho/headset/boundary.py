@@ -22,11 +22,11 @@ seed (a faint tick), and:
    ``L = sqrt((2 d)^2 + s^2)`` (``s``: loudspeaker to microphone): ``d`` follows.
 2. **Tracking.** Echo distances are chained over pulses into tracks (the closest pairs of echo
    and prediction first, within each track's gate: 12 cm while young, then five times its rms
-   residual, at least 4 cm, so a stray peak seldom joins it); a track starts from three echoes
-   no track took that lie in a line over three pulses at a walking pace (:func:`~.tracks.initiate`:
-   one echo says nothing of its speed, and where other headsets' pings crowd the range a track
-   started from one took the stray peak nearest it and lost the surface's, 8 cm on at a fast
-   walk); an alpha-beta filter gives each track's distance and closing speed.
+   residual, at least 4 cm); a track starts from three echoes no track took in a line over three
+   pulses at a walking pace (:func:`~.tracks.initiate`: where other headsets' pings crowd the
+   range, one echo says nothing of its speed), or from a line of faint echoes, too weak for one
+   pulse and summed along each approach over eight (:mod:`.faint`), which also keep a track that
+   missed a pulse's echo; an alpha-beta filter gives each track's distance and closing speed.
 3. **Alerts with hysteresis.** Only surfaces the wearer moves toward count (``approach_m``
    nearer within 0.8 s, in the last second) and will not pass by: a point at lateral offset
    ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, so a quadratic fit over the last 0.3 to 0.6 s
@@ -50,9 +50,8 @@ approach grows a second old, the wearer walks on to the next threshold, or the e
 still arriving of a surface near a threshold has come in (that pulse is then analysed in the block
 its echo ends, an undecided surface asked again with it).
 
-The per-pulse work (a pulse's echoes, the association, the lines that start tracks, the
-closest-approach fits, each block's read) runs in kernels compiled by numba and cached
-(:func:`~.kernels.compile_kernels`, at install and when the first monitor is made, never in the callback).
+The per-pulse work (echoes, faint ones, association, the fits, each block's read) runs in kernels
+compiled by numba and cached (at install and when the first monitor is made, never in a callback).
 
 Robustness: clipped samples are flagged (the timing survives clipping, and the clipped direct
 sound's distortion is kept out); runs of exact zeros (dropouts) and non-finite samples are
@@ -79,7 +78,8 @@ from .echoes import EchoFinder, echo_path, mic_geometry
 from .kernels import compile_kernels, take
 from .ranging import GUARD, Envelope, ProbeSchedule, channel0, clipped, pcm_scale, probe_codes, zero_runs
 from .roundtrip import RoundTrip
-from .tracks import Track, associate, clutter_strength, initiate
+from .faint import FaintEchoes
+from .tracks import Track, associate, attach_faint, clutter_strength, initiate
 from .view import look_all
 
 
@@ -195,8 +195,7 @@ class BoundaryMonitor:
         self._mic = mic_geometry(mic_offset_m)  # (spacing, its forward part)
         self.caution_ttc_s, self.caution_m, self.stop_m = caution_ttc_s, caution_m, stop_m
         self.hysteresis_m, self.approach_m, self.threshold = hysteresis_m, approach_m, threshold
-        self.miss_m = miss_m
-        self.on_alert = on_alert
+        self.miss_m, self.on_alert = miss_m, on_alert
         # A pulse's window: from its direct sound to the echoes from max_range_m, and the probe.
         self.window = int((2 * max_range_m / SPEED_OF_SOUND) * fs) + m + 2
         self._lock = RoundTrip(self.schedule, max_latency_s, int(0.002 * fs))
@@ -226,6 +225,7 @@ class BoundaryMonitor:
         self._pace, self._paced_at = 0.0, 0.0  # the wearer's pace, at least, and when it was judged (_judge)
         self._echoes = EchoFinder(probes, fs, self.window, threshold=threshold, min_range_m=min_range_m,
                                   max_range_m=max_range_m, mic_offset_m=mic_offset_m)
+        self._faint = FaintEchoes(fs, self.window, self._mic, threshold)  # (echoes too weak for one pulse: faint.py)
         compile_kernels()
 
     # -- The callback ------------------------------------------------------------------------------
@@ -453,8 +453,7 @@ class BoundaryMonitor:
         VrechoError
             For a bad frame or intrinsics (:func:`vrecho.headset.view.look`).
         """
-        # The frame shows the wearer now; the echoes left half a round trip after they were
-        # written (the round trip's two sides taken as equal).
+        # The frame shows the wearer now; the echoes left half a round trip after they were written.
         t = self._now / self.fs - 0.5 * (self.latency_s or 0.0)
         fresh = t - (self.latency_s or 0.0) * 0.5
         verdict = self._verdict_track
@@ -511,7 +510,9 @@ class BoundaryMonitor:
             if ref is not None:
                 echoes = self._echoes.find(self._env, ref, end, code=sch.code(k), clipped=self._clipped_at > ref - 8192)
                 if echoes is not None:
-                    self._commit(sch.emission(k) / self.fs, echoes)
+                    t = sch.emission(k) / self.fs
+                    faint = self._faint.add(t, *self._echoes.last, self._still) if self._echoes.last else ((), ())
+                    self._commit(t, echoes, *faint)
                     changed = True
                     self._ends_for = -1
             self._next = k + 1
@@ -564,8 +565,9 @@ class BoundaryMonitor:
                     out.append(lag)
         return out
 
-    def _commit(self, t: float, echoes) -> None:
-        """Add the echoes of the pulse emitted at ``t`` (seconds) to the tracks."""
+    def _commit(self, t: float, echoes, faint=(), lines=()) -> None:
+        """Add the echoes of the pulse emitted at ``t`` (seconds) to the tracks, and its faint echoes
+        and their lines (:class:`~.faint.FaintEchoes`)."""
         updated = []
         clutter = len(echoes) / (self.max_range_m - self.min_range_m)  # peaks per metre in this pulse
         mean_strength = clutter_strength(echoes)
@@ -576,12 +578,14 @@ class BoundaryMonitor:
                 continue
             tr.update(t, d, strength, clutter_per_m=clutter, clutter_strength=mean_strength)
             updated.append(tr)
+        seeded, lifted = attach_faint(self._tracks, t, faint, lines, clutter, mean_strength, fresh)
+        updated += lifted
         for tr in self._tracks:
             if tr.times[-1] != t:
                 tr.missed()
-        # New surfaces: three echoes no track took, in a line over the last three pulses.
+        # New surfaces: three echoes no track took, in a line over the last three pulses, or faint lines.
         self._fresh = self._fresh[-2:] + [(t, fresh, clutter, mean_strength)]
-        born = initiate(self._fresh)
+        born = initiate(self._fresh) + seeded
         self._tracks += born
         updated += born
         for tr in updated:
@@ -636,9 +640,8 @@ class BoundaryMonitor:
                     provisional[id(tr)] = d
         self._oldest_approach = np.inf
         self._judge_at = np.inf
-        # The wearer's pace, at least: the fastest any surface heard for a while nears or recedes
-        # (the wall behind recedes as the wall ahead nears; over the last second or so). A wall
-        # converged on at 10 degrees closes at a fifth of it: aside (see _level_for).
+        # The wearer's pace, at least: the fastest any surface heard for a while nears or recedes (the
+        # wall behind recedes as the wall ahead nears). A wall converged on at 10 degrees: aside.
         pace = max((abs(tr.speed) for tr in self._tracks if tr.speed is not None and tr.confirmed and len(tr.times) >= 8
                     and t_pulse - tr.times[-1] < 0.4), default=0.0)  # (pulse times: the round trip ago)
         self._pace = pace = max(pace, self._pace - (t_now - self._paced_at))  # (forgotten at 1 m/s a second)
@@ -659,12 +662,9 @@ class BoundaryMonitor:
                 level = self._level_for(d_now, ttc, aside)
             elif (len(tr.times) >= 5 and closing >= 0.5 and at - tr.times[-5] < 0.25 and tr.score >= _LOOMING
                   and d < self.caution_m and d / closing < 0.75 and tr.straight(8) < 0.005):
-                # Not yet known to be in the way (the fit needs a third of a second of steady walking),
-                # but near, nearing fast and steadily beyond doubt (stray peaks can line up for a few
-                # pulses where they are dense: the score weighs that, and a surface's last eight
-                # echoes, or all it has, lie on a line within millimetres, where a still wall's track
-                # that took four of another headset's pings in a row bends): a surface rushed at from
-                # close by, or heard late, still warns (as measured: not reckoned on by the echo's age).
+                # Not yet known to be in the way (the fit needs a third of a second), but near, nearing
+                # fast and steadily beyond doubt (the score; the last eight echoes on a line within 5 mm,
+                # where a still wall's track that took another headset's pings bends): still warns.
                 level = "caution"
             else:
                 continue  # not known to be in the way (asked again with the echo still arriving, if any)

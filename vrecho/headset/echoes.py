@@ -36,6 +36,14 @@ class EchoFinder:
         The distances echoes are looked for between, in metres.
     mic_offset_m : float or sequence of 3 floats
         Loudspeaker to microphone (:func:`mic_geometry`).
+
+    Attributes
+    ----------
+    last : tuple
+        What the last :meth:`find` that got as far as the echoes read (for
+        :meth:`FaintEchoes.add <vrecho.headset.faint.FaintEchoes.add>`): the envelope from the
+        direct sound's lag on, that lag less the direct sound's arrival, the envelope's median,
+        the direct sound's peak, its sidelobes by lag, and the first lag looked at.
     """
 
     def __init__(self, probes, fs: int, window: int, *, threshold: float, min_range_m: float,
@@ -44,6 +52,7 @@ class EchoFinder:
         self.threshold, self.min_range_m, self.max_range_m = threshold, min_range_m, max_range_m
         self._mic = mic_geometry(mic_offset_m)
         self._clipped_floors: dict[tuple[int, int], np.ndarray] = {}
+        self.last: tuple = ()
         # The direct sound's sidelobes by lag: 6 dB above the codes' own (the matched filter's
         # response to the code itself), and never below a floor falling from -32 dB (a real
         # loudspeaker's and microphone's own ringing).
@@ -109,6 +118,7 @@ class EchoFinder:
         """
         d0 = int(round(ref))
         m = len(self.probes[0])
+        self.last = ()
         good = env.sound_until(d0 - GUARD, stop + m)
         if good < d0 + m + GUARD:
             return None  # (the direct sound must be whole: it is the reference)
@@ -123,8 +133,9 @@ class EchoFinder:
             if rail >= 3:  # the direct sound clipped: its distortion rises above the sidelobes, near it
                 sidelobe = self._clipped_sidelobe(rail / m, code)
         peak_direct = float(max(span[0], span[1], env.envelope(d0 - 1, d0)[0]))
-        d, strength = echo_peaks(span, lo - d0, self.threshold, peak_direct, sidelobe, self._lobes, d0 - ref,
-                              SPEED_OF_SOUND / self.fs, *self._mic, self.min_range_m, self.max_range_m)
+        d, strength, median = echo_peaks(span, lo - d0, self.threshold, peak_direct, sidelobe, self._lobes, d0 - ref,
+                                         SPEED_OF_SOUND / self.fs, *self._mic, self.min_range_m, self.max_range_m)
+        self.last = (span, d0 - ref, median, peak_direct, sidelobe, lo - d0)
         return list(zip(d.tolist(), strength.tolist()))
 
 

@@ -138,6 +138,8 @@ def echo_peaks(span, lo, threshold, peak_direct, sidelobe, lobes, offset, metres
     -------
     d, strength : numpy.ndarray [shape=(k,)]
         Each echo's distance in metres and its peak as a share of ``peak_direct``.
+    median : float
+        The floor over ``threshold``: the envelope's median.
     """
     n = len(span)
     quarter = span[lo::4].astype(np.float64)
@@ -179,7 +181,7 @@ def echo_peaks(span, lo, threshold, peak_direct, sidelobe, lobes, offset, metres
             d[kept] = dist
             strength[kept] = v / peak_direct
             kept += 1
-    return d[:kept], strength[:kept]
+    return d[:kept], strength[:kept], floor / threshold
 
 
 @njit(cache=True, nogil=True)

@@ -25,6 +25,7 @@ _LOG_MISS = math.log(0.2)
 _LOG_QUARTER = math.log(0.25)
 _LOG_YOUNG_GATE = math.log(2 * 0.12)
 _FLOOR, _CEILING = -10.0, 30.0  # the score's bounds: the last half second of echoes tells
+_LINE_PEAKS = 5  # a line of faint echoes starts a track with five peaks of its own (attach_faint)
 CONFIRMED = math.log(100.0)
 """A track's :attr:`~Track.score` from which its echoes count as a surface's."""
 
@@ -425,3 +426,64 @@ def associate(tracks: list, t: float, echoes) -> list[tuple[Track | None, float,
             continue
         new.append((None, d, strength))
     return out + new
+
+
+def attach_faint(tracks: list, t: float, faint, lines, clutter_per_m: float, clutter_strength: float,
+                 fresh: list) -> tuple[list, list]:
+    """The faint echoes of a pulse (:class:`~vrecho.headset.faint.FaintEchoes`) given to the
+    surfaces: a line of faint echoes no track follows starts one, with its history; a faint echo
+    near (1.5 cm) a track that heard nothing this pulse, approaching at the track's speed (0.3 m/s),
+    is that track's echo; one near no track joins ``fresh`` (:func:`initiate`'s).
+
+    A new track's history is the line's peaks, but its score starts at 0 (undecided): its
+    surface is believed only once its echoes keep coming (a line of noise peaks seldom goes on).
+
+    Parameters
+    ----------
+    tracks : list of Track
+        The surfaces followed, those that heard this pulse's echoes already updated.
+    t : float
+        The pulse's emission, in seconds.
+    faint : list of (float, float, float)
+        Its faint echoes: distance in metres, strength, and their line's approach speed in m/s.
+    lines : list of list of (float, float, float)
+        The lines' peaks, oldest first: emission in seconds, distance, strength.
+    clutter_per_m, clutter_strength : float
+        The pulse's stray peaks per metre and their mean strength (:meth:`Track.update`): a faint
+        echo where other peaks crowd the pulse counts for little.
+    fresh : list of (float, float)
+        The pulse's echoes no track took, sorted by distance: added to in place, kept sorted.
+
+    Returns
+    -------
+    born, updated : list of Track
+        The tracks started, and those a faint echo updated.
+    """
+    born, updated = [], []
+    for line in lines:
+        if len(line) < _LINE_PEAKS or line[-1][0] != t:
+            continue  # (a line needs five peaks of its own, the last of this pulse)
+        d = line[-1][1]
+        if any(abs(tr.predict(t) - d) < 0.03 for tr in tracks) or any(abs(tr.d_hat - d) < 0.03 for tr in born):
+            continue
+        tr = Track()
+        for tj, dj, strength in line:
+            tr.update(tj, dj, strength, clutter_per_m=clutter_per_m)
+        tr.score = 0.0
+        born.append(tr)
+    for d, strength, speed in faint:
+        if any(abs(tr.d_hat - d) < 0.03 for tr in born):
+            continue
+        best, gap = None, 0.015
+        for tr in tracks:
+            if tr.times[-1] != t and tr.speed is not None and abs(tr.speed + speed) < 0.3:
+                g = abs(tr.predict(t) - d)
+                if g < min(gap, tr.gate_m):
+                    best, gap = tr, g
+        if best is not None:
+            best.update(t, d, strength, clutter_per_m=clutter_per_m, clutter_strength=clutter_strength)
+            updated.append(best)
+        elif all(abs(d - e) >= 0.03 for e, _ in fresh) and all(abs(tr.predict(t) - d) >= 0.03 for tr in tracks):
+            bisect.insort(fresh, (d, strength))
+    return born, updated
+
