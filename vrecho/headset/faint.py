@@ -6,7 +6,8 @@ One pulse cannot tell a wall's echo 2 to 4 times the envelope's median from the 
 peaks: over the 1 000 lags of 4 m some noise peak reaches that. But the wall's echo is there in
 every pulse, moving at the wearer's pace; noise peaks land anywhere. Summed over eight pulses
 along each approach speed, the wall's line stands some 6 standard deviations above what noise
-sums to, where one pulse gave 2 or 3. Coarse first (2 cm cells, speeds 0.1 m/s apart), then
+sums to, where one pulse gave 2 or 3. Coarse first (2 cm cells, speeds 0.1 m/s apart; only
+cells where the newest pulse holds a peak twice the median, which a line's echo must be), then
 exactly (each pulse's own lag, interpolated, half-lag steps, speeds 0.025 m/s apart) for the
 few best cells; a line five standard deviations up is a surface's (a walk's eight pulses,
 relocks and damage aside: a pulse not heard within 0.6 s counts as the median, and six of eight
@@ -120,14 +121,23 @@ def _peaks(rows, lens, offsets, ago, newest, l, v, mps, spacing, forward, local)
 
 
 @njit(cache=True, nogil=True)
-def _pulse(span, floor, peak_direct, sidelobe, lo, still, rows, cells, lens, offsets, times, stats, scale, k, t, offset,
-           full, regular, cell_lo, cell_hi, speeds, mps, spacing, forward):  # pragma: no cover (compiled)
+def _pulse(span, floor, peak_direct, sidelobe, lo, still, rows, cells, lens, offsets, times, stats, scale, live, k, t,
+           offset, regular, cell_lo, cell_hi, speeds, mps, spacing, forward):  # pragma: no cover (compiled)
     """:meth:`FaintEchoes.add`'s work in one call: the pulse's row (its envelope over its median,
     capped; the direct sound's sidelobes, the lags before ``lo`` and a still surface's lags at most
-    1) and cells; then, when ``full``, the lines (not through an echo this pulse found already,
+    1) and cells, in slot ``k`` (a slot older than :data:`_MAX_AGE_S` made the median's, and not
+    ``live``); then, with six live slots of eight, the lines (not through an echo found already,
     ``regular`` times the median: the monitor's tracks take those): (faint echoes found, their
     (distance, strength, speed), lines found, each line's peak count, its peaks' (time, distance,
     strength))."""
+    for j in range(PULSES):
+        if t - times[j] > _MAX_AGE_S:  # (pulses missed meanwhile: a relock, damage; or none yet)
+            rows[j, :] = 1.0
+            cells[j, :] = 1.0
+            stats[j, 0], stats[j, 1], stats[j, 2], stats[j, 3] = 1.0, 0.0, 1.0, 0.0
+            times[j] = t
+            live[j] = False
+    live[k] = True
     n = min(len(span), rows.shape[1])
     row = rows[k]
     for i in range(n):
@@ -164,24 +174,27 @@ def _pulse(span, floor, peak_direct, sidelobe, lo, still, rows, cells, lens, off
     found = np.zeros((_CANDIDATES, 3))
     peaks = np.zeros((_CANDIDATES, PULSES, 3))
     lengths = np.zeros(_CANDIDATES, np.int64)
-    if not full:
+    if live.sum() < PULSES - 2:
         return 0, found, 0, lengths, peaks
-    # Coarse: every cell's best sum over the speeds (each pulse's cells shifted by how far the
-    # surface was then), the cells in the inner loop.
+    # Coarse: the best sum over the speeds (each pulse's cells shifted by how far the surface was
+    # then) of every cell where the newest pulse may hold the line's echo (a peak of _LOCAL).
     ago = t - times
+    shifts = np.empty((len(speeds), PULSES), np.int64)
+    for v in range(len(speeds)):
+        for j in range(PULSES):
+            shifts[v, j] = int(np.rint(speeds[v] * ago[j] / _CELL_M))
     best = np.zeros(count)
     arg = np.zeros(count, np.int64)
-    total = np.empty(count, np.float32)
-    for v in range(len(speeds)):
-        total[:] = 0.0
-        for j in range(PULSES):
-            shift = int(np.rint(speeds[v] * ago[j] / _CELL_M))
-            src = cells[j]
-            for c in range(count - shift):
-                total[c] += src[c + shift]
-        for c in range(count):
-            if total[c] > best[c]:
-                best[c] = total[c]
+    for c in range(count):
+        if cells[k, c] < _LOCAL:
+            continue
+        for v in range(len(speeds)):
+            total = 0.0
+            for j in range(PULSES):
+                if c + shifts[v, j] < count:
+                    total += cells[j, c + shifts[v, j]]
+            if total > best[c]:
+                best[c] = total
                 arg[c] = v
     mean = var = fine_mean = fine_var = 0.0
     for j in range(PULSES):
@@ -298,15 +311,12 @@ class FaintEchoes:
         """
         k = self._count % PULSES
         self._count += 1
-        old = t - self._times > _MAX_AGE_S  # (pulses missed meanwhile: a relock, damage; or none yet)
-        for j in np.flatnonzero(old):
-            self._rows[j], self._cells[j], self._stats[j], self._times[j] = 1.0, 1.0, (1.0, 0.0, 1.0, 0.0), t
-        self._live[old] = False
-        self._live[k] = True
         echoes, found, lines, lengths, peaks = _pulse(
             span, floor, peak_direct, sidelobe, lo, np.asarray(still, float), self._rows, self._cells, self._lens,
-            self._offsets, self._times, self._stats, self._scale, k, t, offset, self._live.sum() >= PULSES - 2, self.threshold,
+            self._offsets, self._times, self._stats, self._scale, self._live, k, t, offset, self.threshold,
             self._lo, self._hi, _SPEEDS, self.mps, *self.mic)
+        if not lines:
+            return [], []
         return ([tuple(e) for e in found[:echoes].tolist()],
                 [[tuple(p) for p in peaks[i, :lengths[i]].tolist()] for i in range(lines)])
 

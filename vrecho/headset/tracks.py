@@ -183,7 +183,7 @@ class Track:
                 # anywhere, at the pulse's density of peaks. (Bounded: the last half second tells.)
                 score = self.score + _LOG_NORM - 0.5 * (r / _SIGMA_M) ** 2 - log_clutter
                 if clutter_strength > 0.0:
-                    score += amplitude_llr(strength, clutter_strength)
+                    score += amplitude_llr.py_func(strength, clutter_strength)  # (numba's call costs more here)
                 self.score = _FLOOR if score < _FLOOR else _CEILING if score > _CEILING else score
                 n = len(times) - 1  # residuals so far, this one included: their mean, then a running one
                 self.jitter = r * r if n == 1 else self.jitter + (0.2 if n > 5 else 1.0 / n) * (r * r - self.jitter)
