@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from vrecho.headset.echoes import echo_path
 from vrecho.headset.faint import PULSES, FaintEchoes
+from vrecho.headset.kernels import echo_path
 from vrecho.headset.ranging import ranging_probe
 from vrecho.signals import SPEED_OF_SOUND, analytic_envelope, analytic_filter
 

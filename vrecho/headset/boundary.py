@@ -74,8 +74,8 @@ import numpy as np
 from ..errors import VrechoError, check_count, check_number
 from ..signals import SPEED_OF_SOUND
 from .alert import Alert
-from .echoes import EchoFinder, echo_path, mic_geometry
-from .kernels import compile_kernels, take
+from .echoes import EchoFinder, mic_geometry
+from .kernels import compile_kernels, echo_path, take
 from .ranging import GUARD, Envelope, ProbeSchedule, channel0, clipped, pcm_scale, probe_codes, zero_runs
 from .roundtrip import RoundTrip
 from .faint import FaintEchoes

@@ -1,7 +1,7 @@
 """A pulse's echoes in the microphone's envelope (:class:`EchoFinder`), and the geometry that turns
 an echo's delay after the direct sound into the distance of the surface ahead
-(:func:`mic_geometry`, :func:`echo_path`; its inverse, compiled, is
-:func:`~vrecho.headset.kernels.echo_distance`).
+(:func:`mic_geometry`; the path itself and its inverse, compiled, are
+:func:`~vrecho.headset.kernels.echo_path` and :func:`~vrecho.headset.kernels.echo_distance`).
 """
 
 from __future__ import annotations
@@ -173,31 +173,3 @@ def mic_geometry(mic_offset_m) -> tuple[float, float]:
     if not 0.0 <= s <= 0.5:
         raise VrechoError(f"mic_offset_m: expected a spacing of 0 to 0.5 m, got {s:.3f} m")
     return round(s, 12), round(float(o[0]) if o.shape == (3,) else 0.0, 12)
-
-
-def echo_path(d, spacing: float, forward: float):
-    """The echo path's excess over the direct path, for a surface ``d`` straight ahead.
-
-    The image of the loudspeaker lies ``2 d`` ahead; the microphone ``forward`` ahead of the
-    loudspeaker and ``spacing`` from it: the path is sqrt(4 d^2 - 4 d forward + spacing^2).
-
-    Parameters
-    ----------
-    d : float or numpy.ndarray
-        Distance to the surface's plane, metres.
-    spacing, forward : float
-        :func:`mic_geometry`'s.
-
-    Returns
-    -------
-    float or numpy.ndarray
-        Metres, the path less the direct path (``spacing``).
-
-    Examples
-    --------
-    Inverted by :func:`~vrecho.headset.kernels.echo_distance`:
-
-    >>> round(float(echo_distance(echo_path(1.2, 0.05, 0.03), 0.05, 0.03)), 9)
-    1.2
-    """
-    return np.sqrt(4 * d * d - 4 * d * forward + spacing * spacing) - spacing

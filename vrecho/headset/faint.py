@@ -28,7 +28,7 @@ import numpy as np
 from numba import njit
 
 from ..signals import SPEED_OF_SOUND
-from .kernels import echo_distance
+from .kernels import echo_distance, echo_path
 
 PULSES = 8
 """Pulses summed (0.32 s at the default period)."""
@@ -40,12 +40,6 @@ _CANDIDATES = 6  # cells verified exactly, the strongest first (not through an e
 _LOCAL = 2.0  # a line's echo in one pulse: a peak at least twice the median, within a lag of the line
 _MAX_RANGE_M, _MIN_RANGE_M = 3.0, 0.3
 _MAX_AGE_S = 0.6  # an older pulse counts as the median everywhere (its noise's mean: no evidence)
-
-
-@njit(cache=True, nogil=True)
-def _lag(d, offset, mps, spacing, forward):  # pragma: no cover (compiled)
-    """The lag (samples after a pulse's direct sound, fractional) of a surface's echo ``d`` ahead."""
-    return (np.sqrt(max(4 * d * d - 4 * d * forward + spacing * spacing, 0.0)) - spacing) / mps - offset
 
 
 @njit(cache=True, nogil=True)
@@ -75,8 +69,8 @@ def _fine(rows, lens, offsets, ago, newest, l0, l1, v0, v1, mps, spacing, forwar
     for q in range(9):
         v = v0 + (v1 - v0) * q / 8
         for j in range(pulses):  # (linear in the lag over a cell's few lags)
-            lags[j] = _lag(d0 + v * ago[j], offsets[j], mps, spacing, forward)
-            slope[j] = (_lag(d1 + v * ago[j], offsets[j], mps, spacing, forward) - lags[j]) / max(l1 - l0, 1e-9)
+            lags[j] = echo_path(d0 + v * ago[j], spacing, forward) / mps - offsets[j]
+            slope[j] = (echo_path(d1 + v * ago[j], spacing, forward) / mps - offsets[j] - lags[j]) / max(l1 - l0, 1e-9)
         top, at = -1.0, 0.0
         for step in range(int(l1 - l0) + 1):
             s = _line_sum(rows, lens, lags, slope, float(step))
@@ -102,7 +96,7 @@ def _peaks(rows, lens, offsets, ago, newest, l, v, mps, spacing, forward, local)
     height = np.zeros(pulses)
     d = echo_distance(mps * (l + offsets[newest]), spacing, forward)
     for j in range(pulses):
-        i = int(np.rint(_lag(d + v * ago[j], offsets[j], mps, spacing, forward)))
+        i = int(np.rint(echo_path(d + v * ago[j], spacing, forward) / mps - offsets[j]))
         if i - 2 < 0 or i + 2 >= lens[j]:
             continue
         p = i - 1
@@ -146,8 +140,8 @@ def _pulse(span, floor, peak_direct, sidelobe, lo, still, rows, cells, lens, off
             v = min(v, 1.0)
         row[i] = _CAP if v > _CAP else v
     for ds in still:
-        a = max(int(_lag(ds - 0.02, 0.0, mps, spacing, forward)) - 1, 0)
-        b = min(int(_lag(ds + 0.02, 0.0, mps, spacing, forward)) + 2, n)
+        a = max(int(echo_path(ds - 0.02, spacing, forward) / mps) - 1, 0)
+        b = min(int(echo_path(ds + 0.02, spacing, forward) / mps) + 2, n)
         for i in range(a, b):
             row[i] = min(row[i], 1.0)
     s = s2 = 0.0
@@ -265,7 +259,7 @@ class FaintEchoes:
         self.mic = mic
         count = int(round((_MAX_RANGE_M - _MIN_RANGE_M) / _CELL_M))
         edges = _MIN_RANGE_M + _CELL_M * np.arange(count + 1)
-        lags = np.array([_lag(d, 0.0, self.mps, *mic) for d in edges])
+        lags = np.array([echo_path(d, *mic) / self.mps for d in edges])
         self._lo = (np.floor(lags[:-1]) - 1).astype(np.int64)
         self._hi = (np.ceil(lags[1:]) + 2).astype(np.int64)
         self._rows = np.ones((PULSES, window + 8), np.float32)
@@ -333,5 +327,5 @@ def _warm() -> None:
         rng = np.random.default_rng(0)  # (noise with one faint line: every branch of the kernel runs)
         for i in range(PULSES + 1):
             span = rng.rayleigh(1.0, 1400).astype(np.float32)
-            span[int(_lag(2.0 - 1.2 * 0.04 * i, 0.0, f.mps, *f.mic)) + np.arange(-1, 2)] += np.float32(8.0)
+            span[int(echo_path(2.0 - 1.2 * 0.04 * i, *f.mic) / f.mps) + np.arange(-1, 2)] += np.float32(8.0)
             f.add(0.04 * i, span, 0.0, 1.2, 100.0, np.zeros(8), 30, [1.0])

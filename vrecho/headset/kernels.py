@@ -1,6 +1,6 @@
 """The headset call's per-pulse work, compiled (numba, cached on disk): the block's read
 (:func:`take`), a pulse's echoes in its envelope (:func:`echo_peaks`, their distances
-:func:`echo_distance`), their pairing with the tracks (:func:`pair`, strengths weighed by
+:func:`echo_distance`, the inverse of :func:`echo_path`), their pairing with the tracks (:func:`pair`, strengths weighed by
 :func:`amplitude_llr`), the lines that start tracks (:func:`lines`), and the tracks' fits
 (:func:`closest_approach`, :func:`passing`). Plain loops over a few hundred lags or a few
 dozen echoes, where a score of array calls cost more than the work; :mod:`.boundary`, :mod:`.echoes`
@@ -30,7 +30,7 @@ def compile_kernels() -> None:
     closest_approach(np.arange(10.0), np.ones(10), np.array([0.6, 0.45]), 0.4)
     passing(np.arange(10.0), np.ones(10), np.array([0.5]), 0.6)
     pair(np.ones(2), np.ones(2), np.ones(1), np.ones(1), 1.0, 0.01)
-    amplitude_llr(1.0, 1.0)  # (Track.update calls it too)
+    echo_path(1.0, 0.07, 0.0)  # (scalars, as the monitor calls it too)
     lines(np.ones(1), np.ones(1), np.ones(1), 0.5, -0.1, 0.1, 0.006)
     _COMPILED = True
 
@@ -80,8 +80,37 @@ def take(x, out, at):  # pragma: no cover (compiled)
 
 
 @njit(cache=True, nogil=True)
+def echo_path(d, spacing, forward):  # pragma: no cover (compiled)
+    """The echo path's excess over the direct path, for a surface ``d`` straight ahead.
+
+    The image of the loudspeaker lies ``2 d`` ahead; the microphone ``forward`` ahead of the
+    loudspeaker and ``spacing`` from it: the path is sqrt(4 d^2 - 4 d forward + spacing^2).
+
+    Parameters
+    ----------
+    d : float
+        Distance to the surface's plane, metres.
+    spacing, forward : float
+        :func:`~vrecho.headset.echoes.mic_geometry`'s.
+
+    Returns
+    -------
+    float
+        Metres, the path less the direct path (``spacing``).
+
+    Examples
+    --------
+    Inverted by :func:`echo_distance`:
+
+    >>> round(float(echo_distance(echo_path(1.2, 0.05, 0.03), 0.05, 0.03)), 9)
+    1.2
+    """
+    return np.sqrt(4 * d * d - 4 * d * forward + spacing * spacing) - spacing
+
+
+@njit(cache=True, nogil=True)
 def echo_distance(excess, spacing, forward):  # pragma: no cover (compiled)
-    """:func:`~vrecho.headset.echoes.echo_path` inverted: the distance to the surface ahead whose
+    """:func:`echo_path` inverted: the distance to the surface ahead whose
     echo came ``excess`` metres of path after the direct sound (:func:`echo_peaks` uses it).
 
     Parameters
