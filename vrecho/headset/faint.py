@@ -129,6 +129,7 @@ def _pulse(span, floor, peak_direct, sidelobe, lo, still, rows, cells, lens, off
             rows[j, :] = 1.0
             cells[j, :] = 1.0
             stats[j, 0], stats[j, 1], stats[j, 2], stats[j, 3] = 1.0, 0.0, 1.0, 0.0
+            lens[j] = rows.shape[1]
             times[j] = t
             live[j] = False
     live[k] = True
