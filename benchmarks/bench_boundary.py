@@ -53,7 +53,12 @@ at the pulse that measured it, on closed walks); the round trip's error once loc
 long the lock took; the surface named at the first stop; the processing time per 10 ms of
 audio against a baseline timed beside every block (one 1024-point FFT matched filter of a 10 ms
 block), at default thread settings: the time of ``monitor.callback`` as sounddevice calls it
-(float32 blocks of one channel in and out, the loudspeaker's block filled).
+(float32 blocks of one channel in and out, the loudspeaker's block filled); and how loud the
+surface's echo was in the stream the monitor heard (:func:`echo_level`, median over the walks
+that cautioned in time and those that did not), what a monitor can hear at all.
+
+``--out DIR`` keeps every walk's result (``walks.json``); ``figure_echo_level.py DIR`` draws the
+echo levels against the outcome.
 """
 
 from __future__ import annotations
@@ -72,7 +77,10 @@ from tqdm import tqdm
 
 from vrecho.errors import VrechoError
 from vrecho.headset import BoundaryMonitor, ranging_probe
+from vrecho.headset.echoes import mic_geometry
+from vrecho.headset.kernels import echo_path
 from vrecho.scene import Discontinuity
+from vrecho.signals import SPEED_OF_SOUND, analytic_envelope, analytic_filter
 from vrecho.sim.render import World
 from vrecho.sim.scenes import closed_absorption, random_furniture, random_scene
 from vrecho.sim.walks import AMBIENT_KINDS, AudioLink, Headset, Walk, headset_frames, other_headsets, record_walk, \
@@ -305,6 +313,42 @@ def run_walk(walk: Walk, kind: str, seed: int, mic_offset, spec: dict, rng: np.r
             "baseline_s": base_s, "lat_err": lat_err, "locked_at": locked_at}
 
 
+BANDS_M = ((3.0, 2.0), (2.0, 1.5), (1.5, 1.0), (1.0, 0.5))
+"""The distance bands (metres, far to near) over which :func:`echo_level` is given."""
+
+
+def echo_level(walk: Walk, seed: int, mic_offset) -> list[float]:
+    """What the microphone's stream holds of the surface's echo, whatever a monitor makes of it.
+
+    Per pulse: the matched filter's envelope (the pulse's own code) at the echo's true lag after
+    the direct sound's true arrival (the largest within two samples), over the envelope's median
+    from the direct sound to 3.2 m; the median over the pulses in each of :data:`BANDS_M`. Noise
+    alone gives about 2 (the largest of five samples of its envelope); a wall 2 m ahead heard
+    well, 10 and more."""
+    fs = walk.fs
+    sch = BoundaryMonitor(fs, seed=seed).schedule
+    spacing, forward = mic_geometry(mic_offset)
+    span = int((spacing + echo_path(3.2, spacing, forward)) / SPEED_OF_SOUND * fs) + 4
+    n = 1 << int(np.ceil(np.log2(span + sch.length)))
+    kernels = {}
+    levels = []
+    for k, (a, d) in enumerate(zip(walk.arrival, walk.distance_m)):
+        a = int(round(a))
+        seg = walk.mic[a:a + span + sch.length]
+        if len(seg) < span + sch.length:
+            break
+        code = sch.code(k)
+        if code not in kernels:
+            kernels[code] = analytic_filter(sch.probes[code], n)
+        env = analytic_envelope(seg, kernels[code], n)[:span]
+        lag = int(round((spacing + echo_path(d, spacing, forward)) / SPEED_OF_SOUND * fs))  # (from the emission's arrival)
+        if 2 <= lag < span - 2:
+            levels.append((d, env[lag - 2:lag + 3].max() / max(np.median(env), 1e-30)))
+    lv = np.array(levels).reshape(-1, 2)
+    return [float(np.median(lv[(lv[:, 0] <= hi) & (lv[:, 0] > lo), 1])) if np.any((lv[:, 0] <= hi) & (lv[:, 0] > lo))
+            else float("nan") for hi, lo in BANDS_M]
+
+
 def bench_one(args) -> list[dict]:
     """One room: every walk, every headset, every row."""
     seed, k, rows = args
@@ -373,6 +417,8 @@ def bench_one(args) -> list[dict]:
                               others=others)
             mic = 0.07 if row == "spacing not given" else headsets[headset_name].mic_offset_m
             res = run_walk(rec, kind, wseed, mic, spec, r, frames)
+            if kind in CLOSED:
+                res["echo_level"] = echo_level(rec, wseed, headsets[headset_name].mic_offset_m)
             out.append({"room": k, "row": row, "kind": kind, "speed": speeds[kind], "fs": fs,
                         "latency_s": spec["link"].latency_s, "ambient": spec["ambient"], "ambient_db": spec["ambient_db"],
                         "headset": headsets[headset_name].__dict__ if headset_name != "reference" else None, **res})
@@ -427,6 +473,8 @@ def held_out_room(args) -> list[dict]:
                     arrival, link.latency_s * link.output_share)
         spec = {"blocks": (16, 4097), "disturbed": False}
         res = run_walk(walk, kind if kind == "wall" else "past wall", wseed, 0.07, spec, rng, [])
+        if kind == "wall":
+            res["echo_level"] = echo_level(walk, wseed, 0.07)
         out.append({"room": k, "row": "another simulator", "kind": kind, "speed": speed, "fs": fs,
                     "latency_s": link.latency_s, **res})
     return out
@@ -436,7 +484,7 @@ def held_out_room(args) -> list[dict]:
 def table(rows_out: list[dict], rows: tuple) -> list[str]:
     lines = ["| condition | walks toward glass / mirror / wall | caution before 0.5 m | walks through doors / past "
              "| false alarms | distance error median / p90 | round trip error median / p99, lock | named right at stop "
-             "| time per 10 ms / baseline |", "|---|---|---|---|---|---|---|---|---|"]
+             "| time per 10 ms / baseline | echo level at 1.5-1 m: cautioned / missed |", "|---|---|---|---|---|---|---|---|---|---|"]
     for row in rows:
         rs = [r for r in rows_out if r["row"] == row and "skipped" not in r]
         if not rs:
@@ -452,13 +500,15 @@ def table(rows_out: list[dict], rows: tuple) -> list[str]:
         named = sum(r["first_stop"]["surface"] == r["kind"] for r in stops)
         ratio = sum(r["spent_s"] for r in rs) / max(sum(r["baseline_s"] for r in rs), 1e-12)
         per_kind = " / ".join(str(sum(r["kind"] == kd for r in closed)) for kd in CLOSED)
+        level = [f"{np.nanmedian([r['echo_level'][2] for r in sel]):.1f}" if sel else "-"
+                 for sel in (hit, [r for r in closed if r not in hit])]
         lines.append(
             f"| {row} | {per_kind} | {len(hit) / max(len(closed), 1):.1%} ({len(hit)}/{len(closed)}) | "
             f"{sum(r['kind'] == 'open' for r in passing)} / {sum(r['kind'] != 'open' for r in passing)} | "
             f"{len(fa) / max(len(passing), 1):.1%} ({len(fa)}/{len(passing)}) | "
             f"{np.nanmedian(errs) * 100:.2f} / {np.nanpercentile(errs, 90) * 100:.2f} cm | "
             f"{np.nanmedian(lat):.3f} / {np.nanpercentile(lat, 99):.2f} ms, {lock:.2f} s | {named}/{len(stops)} | "
-            f"{ratio:.2f} |")
+            f"{ratio:.2f} | {level[0]} / {level[1]} |")
     return lines
 
 
@@ -471,7 +521,7 @@ def failures(rows_out: list[dict]) -> list[str]:
             said = f"alert at {r['first_alert']['distance_m']:.2f} m" if r["first_alert"] else "no alert"
             noise = f", {r['ambient']} {r['ambient_db']:.0f} dB down" if r.get("ambient") else ""
             out.append(f"  missed: {r['row']}, room {r['room']} {r['kind']} {r['speed']:.1f} m/s, "
-                       f"latency {r['latency_s'] * 1e3:.0f} ms{noise}: {said}")
+                       f"latency {r['latency_s'] * 1e3:.0f} ms{noise}, echo level {r['echo_level'][2]:.1f}: {said}")
         elif r["kind"] not in CLOSED and r["first_alert"]:
             out.append(f"  false alarm: {r['row']}, room {r['room']} {r['kind']} {r['speed']:.1f} m/s, latency "
                        f"{r['latency_s'] * 1e3:.0f} ms: {r['first_alert']['level']} at {r['first_alert']['t']:.2f} s")

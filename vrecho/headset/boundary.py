@@ -662,10 +662,9 @@ class BoundaryMonitor:
                 level = self._level_for(d_now, ttc, aside)
             elif (len(tr.times) >= 5 and closing >= 0.5 and at - tr.times[-5] < 0.45 and tr.score >= _LOOMING
                   and d < self.caution_m and d / closing < 0.75 and tr.straight(8) < 0.005):
-                # Not yet known to be in the way (the fit needs a third of a second), but near, nearing
-                # fast and steadily beyond doubt (the score; the last eight echoes on a line within 5 mm,
-                # where a still wall's track that took another headset's pings bends): still warns. (Its
-                # last five echoes within 0.45 s: dropouts and a relock cost a track pulses.)
+                # Not yet known to be in the way (the fit needs a third of a second), but near, nearing fast
+                # and steadily beyond doubt (the score; the last eight echoes on a line within 5 mm, where a still
+                # wall's track that took another headset's pings bends; five in 0.45 s: dropouts cost pulses).
                 level = "caution"
             else:
                 continue  # not known to be in the way (asked again with the echo still arriving, if any)
