@@ -40,6 +40,9 @@ def main() -> None:
     ax.axvline(2.0, color="0.5", ls=":", lw=1)
     ax.text(2.0, len(rows) - 0.4, " noise alone", color="0.4", fontsize=8)
     ax.set_xscale("log")
+    ticks = [1, 1.5, 2, 3, 5, 10, 20, 50, 100]
+    ax.set_xticks(ticks, [f"{t:g}" for t in ticks])
+    ax.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
     ax.set_yticks(range(len(rows)), rows)
     ax.invert_yaxis()
     ax.set_xlabel("echo level at 1.5 to 1 m: the echo's envelope over the envelope's median (log)")
