@@ -371,12 +371,14 @@ def bench_one(args) -> list[dict]:
             corridors += [(start[:2] + (goal[:2] - start[:2]) * s, 0.55) for s in np.arange(0.0, reach + 0.3, 0.3)]
     furnished.furniture = random_furniture(furnished.room, rng, int(rng.integers(3, 5)), keep_clear=corridors)
     rooms = {"plain": (scene, World(scene)), "furnished": (furnished, World(furnished))}
+    past_speeds = {}
     for kind in ("past wall", "past furniture"):
-        speed = float(rng.uniform(0.5, 2.0))
+        speed = past_speeds[kind] = float(rng.uniform(0.5, 2.0))
         g = walk_past(furnished, rng, speed, furniture=kind == "past furniture")
         if g is not None:
             geometries[kind] = g
     speeds = {kind: float(rng.uniform(0.5, 2.0)) for kind in KINDS}
+    speeds.update(past_speeds)  # (a walk past ends while what lies ahead is 2 s away at the speed it is walked at)
     headsets = {"reference": Headset(), "omni": Headset(speaker_p=1.0), "any": any_headset(rng), "all": any_headset(rng)}
     cache = {}
 
