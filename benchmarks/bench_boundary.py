@@ -333,7 +333,10 @@ def echo_level(walk: Walk, seed: int, mic_offset) -> list[float]:
     fs = walk.fs
     sch = BoundaryMonitor(fs, seed=seed).schedule
     spacing, forward = mic_geometry(mic_offset)
-    span = int((spacing + echo_path(3.2, spacing, forward)) / SPEED_OF_SOUND * fs) + 4
+
+    def delay(d):  # samples from the emission's arrival to the echo of a surface d ahead
+        return (spacing + echo_path(d, spacing, forward)) / SPEED_OF_SOUND * fs
+    span = int(delay(3.2)) + 4
     n = 1 << int(np.ceil(np.log2(span + sch.length)))
     kernels = {}
     levels = []
@@ -346,7 +349,7 @@ def echo_level(walk: Walk, seed: int, mic_offset) -> list[float]:
         if code not in kernels:
             kernels[code] = analytic_filter(sch.probes[code], n)
         env = analytic_envelope(seg, kernels[code], n)[:span]
-        lag = int(round((spacing + echo_path(d, spacing, forward)) / SPEED_OF_SOUND * fs))  # (from the emission's arrival)
+        lag = int(round(delay(d)))
         if 2 <= lag < span - 2:
             levels.append((d, env[lag - 2:lag + 3].max() / max(np.median(env), 1e-30)))
     lv = np.array(levels).reshape(-1, 2)
@@ -488,6 +491,11 @@ def held_out_room(args) -> list[dict]:
 
 
 # -- The report ------------------------------------------------------------------------------------------
+def cautioned(r: dict) -> bool:
+    """Whether a walk toward a surface had its first alert before 0.5 m."""
+    return bool(r["first_alert"]) and r["first_alert"]["distance_m"] >= 0.5
+
+
 def table(rows_out: list[dict], rows: tuple) -> list[str]:
     lines = ["| condition | walks toward glass / mirror / wall | caution before 0.5 m | walks through doors / past "
              "| false alarms | distance error median / p90 | round trip error median / p99, lock | named right at stop "
@@ -498,7 +506,7 @@ def table(rows_out: list[dict], rows: tuple) -> list[str]:
             continue
         closed = [r for r in rs if r["kind"] in CLOSED]
         passing = [r for r in rs if r["kind"] not in CLOSED]
-        hit = [r for r in closed if r["first_alert"] and r["first_alert"]["distance_m"] >= 0.5]
+        hit = [r for r in closed if cautioned(r)]
         fa = [r for r in passing if r["first_alert"]]
         errs = np.array([e for r in closed for e in r["errors"]] or [np.nan])
         lat = np.array([e for r in rs for e in r["lat_err"]] or [np.nan]) * 1e3
@@ -508,7 +516,7 @@ def table(rows_out: list[dict], rows: tuple) -> list[str]:
         ratio = sum(r["spent_s"] for r in rs) / max(sum(r["baseline_s"] for r in rs), 1e-12)
         per_kind = " / ".join(str(sum(r["kind"] == kd for r in closed)) for kd in CLOSED)
         level = [f"{np.nanmedian([r['echo_level'][2] for r in sel]):.1f}" if sel else "-"
-                 for sel in (hit, [r for r in closed if r not in hit])]
+                 for sel in (hit, [r for r in closed if not cautioned(r)])]
         lines.append(
             f"| {row} | {per_kind} | {len(hit) / max(len(closed), 1):.1%} ({len(hit)}/{len(closed)}) | "
             f"{sum(r['kind'] == 'open' for r in passing)} / {sum(r['kind'] != 'open' for r in passing)} | "
@@ -524,7 +532,7 @@ def failures(rows_out: list[dict]) -> list[str]:
     for r in rows_out:
         if "skipped" in r:
             out.append(f"  skipped: {r['row']}, room {r['room']} {r['kind']}: {r['skipped']}")
-        elif r["kind"] in CLOSED and not (r["first_alert"] and r["first_alert"]["distance_m"] >= 0.5):
+        elif r["kind"] in CLOSED and not cautioned(r):
             said = f"alert at {r['first_alert']['distance_m']:.2f} m" if r["first_alert"] else "no alert"
             noise = f", {r['ambient']} {r['ambient_db']:.0f} dB down" if r.get("ambient") else ""
             out.append(f"  missed: {r['row']}, room {r['room']} {r['kind']} {r['speed']:.1f} m/s, "

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-CLOSED = ("glass", "mirror", "wall")
+sys.path.insert(0, str(ROOT))
 
 
 def main() -> None:
@@ -27,6 +28,8 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # heavy: as above
 
+    from bench_boundary import CLOSED, cautioned
+
     walks = [w for w in json.loads((a.dir / "walks.json").read_text())
              if w.get("kind") in CLOSED and "echo_level" in w and np.isfinite(w["echo_level"][2])]
     rows = list(dict.fromkeys(w["row"] for w in walks))
@@ -34,7 +37,7 @@ def main() -> None:
     fig, ax = plt.subplots(figsize=(8, 0.35 * len(rows) + 1.6))
     for i, row in enumerate(rows):
         for w in (w for w in walks if w["row"] == row):
-            ok = w["first_alert"] is not None and w["first_alert"]["distance_m"] >= 0.5
+            ok = cautioned(w)
             ax.scatter(w["echo_level"][2], i + rng.uniform(-0.25, 0.25), s=12 if ok else 28,
                        c="tab:green" if ok else "tab:red", marker="o" if ok else "x", alpha=0.6 if ok else 0.9, lw=1.2)
     ax.axvline(2.0, color="0.5", ls=":", lw=1)
