@@ -26,7 +26,7 @@ seed (a faint tick), and:
    pulses at a walking pace (:func:`~.tracks.initiate`: where other headsets' pings crowd the
    range, one echo says nothing of its speed), or from a line of faint echoes, too weak for one
    pulse and summed along each approach over eight (:mod:`.faint`), which also keep a track that
-   missed a pulse's echo; an alpha-beta filter gives each track's distance and closing speed.
+   missed a pulse's echo; a Kalman filter gives each track's distance and closing speed.
 3. **Alerts with hysteresis.** Only surfaces the wearer moves toward count (``approach_m``
    nearer within 0.8 s, in the last second) and will not pass by: a point at lateral offset
    ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, so a quadratic fit over the last 0.3 to 0.6 s

@@ -1,5 +1,5 @@
 """A surface the headset's echoes follow over pulses (:class:`Track`): its distance and closing
-speed (an alpha-beta filter), whether it lies in the wearer's way (the closest point of approach,
+speed (a Kalman filter), whether it lies in the wearer's way (the closest point of approach,
 :meth:`Track.in_the_way`) or is a second-order echo passing by (:meth:`Track.explained_by`), and
 what the headset's camera made of it. :class:`~vrecho.headset.BoundaryMonitor` keeps them, and
 gives each pulse's echoes to them with :func:`associate`, and starts new ones from the echoes
@@ -19,8 +19,10 @@ from .kernels import amplitude_llr, closest_approach, lines, pair, passing
 
 
 _SIGMA_M = 0.01
-"""How far a surface's echo strays from the track's prediction (head bob, the filter's lag)."""
-_LOG_NORM = -math.log(math.sqrt(2 * math.pi) * _SIGMA_M)
+"""How far a surface's echo strays from where the surface is (head bob, the echo's peak)."""
+_VAR_M = _SIGMA_M ** 2
+_ACCEL = 3.0
+"""How fast the wearer's pace changes, m/s^2 (the tracks' filter's white acceleration)."""
 _LOG_MISS = math.log(0.2)
 _LOG_QUARTER = math.log(0.25)
 _LOG_YOUNG_GATE = math.log(2 * 0.12)
@@ -67,7 +69,7 @@ class Track:
     approached_at : float
         When (seconds) the surface last counted as approached; -inf until it has.
     speed : float or None
-        d distance / dt in m/s (negative: approaching), an alpha-beta filter's; None until the
+        d distance / dt in m/s (negative: approaching), the Kalman filter's; None until the
         second echo.
     ahead : bool or None
         In the wearer's way at the last update (None: cannot tell yet).
@@ -87,19 +89,22 @@ class Track:
         The evidence that the echoes are one surface's and not stray peaks that happened near the
         prediction: the log-likelihood ratio summed over pulses (:meth:`update`, :meth:`missed`);
         :attr:`confirmed` above :data:`CONFIRMED`.
+    cov : tuple of float
+        The filter's covariance of distance and speed at the last echo: (m^2, m^2/s, m^2/s^2).
     """
 
     times: deque = field(default_factory=lambda: deque(maxlen=64))
     dists: deque = field(default_factory=lambda: deque(maxlen=64))
     strengths: deque = field(default_factory=lambda: deque(maxlen=64))
     approached_at: float = -np.inf
-    speed: float | None = None  # d distance / dt (negative: approaching), an alpha-beta filter's
+    speed: float | None = None  # d distance / dt (negative: approaching), the filter's
     ahead: bool | None = None  # in the wearer's way, at the last update (None: cannot tell yet)
     d_hat: float = 0.0
     views: dict = field(default_factory=dict)  # what the camera made of it: surface -> summed confidence
     jitter: float = 0.0025  # residuals' mean square (m^2): starts at (5 cm)^2
     gate_m: float = 0.12  # how far from its prediction an echo may lie and be this surface's
     score: float = 0.0  # log-likelihood ratio, a surface against stray peaks (see update)
+    cov: tuple = (0.0, 0.0, 0.0)  # the filter's covariance of (distance, speed): dd, dv, vv
 
     @property
     def surface(self) -> str:
@@ -138,13 +143,18 @@ class Track:
         times in five)."""
         self.score = max(self.score + _LOG_MISS, _FLOOR)
 
-    def update(self, t: float, d: float, strength: float, *, clutter_per_m: float = 1.0, clutter_strength: float = 0.0,
-               alpha: float = 0.6, beta: float = 0.3) -> None:
-        """Add one echo: an alpha-beta filter of distance and speed, and the raw history.
+    def update(self, t: float, d: float, strength: float, *, clutter_per_m: float = 1.0,
+               clutter_strength: float = 0.0) -> None:
+        """Add one echo: a Kalman filter of distance and speed, and the raw history.
 
-        The filter follows a wearer who starts or stops walking within a few pulses. The first
-        echo sets the distance; the second sets the speed from the two (a fast walk's echo moves
-        some 8 cm a pulse); from the third on, the filter's residual corrects both.
+        The wearer's pace changes (starting, stopping, a stride's surge) at up to some 3 m/s^2
+        (:data:`_ACCEL`): the filter's prediction is that uncertain, more so for a young track
+        (its speed from two or three echoes) and after missed pulses, and an echo is weighed
+        against that spread, not a fixed one (a track started on a wearer speeding up, whose
+        echoes came every other pulse, lost 4 cm to its prediction and was dropped as stray).
+        In steady walking it is the alpha-beta filter of gains 0.6 and 0.3. The first echo sets
+        the distance; the second sets the speed from the two (a fast walk's echo moves some 8 cm
+        a pulse); from the third on, the filter corrects both.
 
         Parameters
         ----------
@@ -162,8 +172,6 @@ class Track:
             The mean strength of this pulse's peaks (0: not weighed). Stray peaks' strengths
             spread about their mean as a noise's envelope peaks do (an exponential tail); a
             surface's echo standing out above them is weighed as evidence (:func:`amplitude_llr`).
-        alpha, beta : float
-            The filter's gains on distance and speed (default 0.6 and 0.3).
         """
         log_clutter = math.log(clutter_per_m) if clutter_per_m > 0.25 else _LOG_QUARTER  # (plain floats: per echo)
         times = self.times
@@ -175,20 +183,28 @@ class Track:
                 dt = 1e-3
             if self.speed is None:  # the second echo: the speed from the two (a fast walk's echo moves ~8 cm a pulse)
                 self.d_hat, self.speed = d, (d - self.d_hat) / dt
+                self.cov = (_VAR_M, _VAR_M / dt, 2 * _VAR_M / (dt * dt))
                 self.score -= _LOG_YOUNG_GATE + log_clutter  # anywhere within the young gate
             else:
+                pdd, pdv, pvv = self.cov  # predicted: the wearer's pace may change (white acceleration)
+                q = _ACCEL * _ACCEL * dt * dt
+                pdd, pdv, pvv = (pdd + dt * (2 * pdv + dt * pvv) + q * dt * dt / 4,
+                                 pdv + dt * pvv + q * dt / 2, pvv + q)
+                s = pdd + _VAR_M  # the echo's spread about the prediction
                 predicted = self.d_hat + self.speed * dt
                 r = d - predicted
-                # A surface's echo falls within about a centimetre of the prediction; a stray peak
-                # anywhere, at the pulse's density of peaks. (Bounded: the last half second tells.)
-                score = self.score + _LOG_NORM - 0.5 * (r / _SIGMA_M) ** 2 - log_clutter
+                # A surface's echo falls within that spread of the prediction; a stray peak anywhere,
+                # at the pulse's density of peaks. (Bounded: the last half second tells.)
+                score = self.score - 0.5 * (math.log(2 * math.pi * s) + r * r / s) - log_clutter
                 if clutter_strength > 0.0:
                     score += amplitude_llr.py_func(strength, clutter_strength)  # (numba's call costs more here)
                 self.score = _FLOOR if score < _FLOOR else _CEILING if score > _CEILING else score
                 n = len(times) - 1  # residuals so far, this one included: their mean, then a running one
                 self.jitter = r * r if n == 1 else self.jitter + (0.2 if n > 5 else 1.0 / n) * (r * r - self.jitter)
-                self.d_hat = predicted + alpha * r
-                self.speed += beta * r / dt
+                kd, kv = pdd / s, pdv / s
+                self.d_hat = predicted + kd * r
+                self.speed += kv * r
+                self.cov = ((1 - kd) * pdd, (1 - kd) * pdv, pvv - kv * pdv)
         times.append(t)
         self.dists.append(d)
         self.strengths.append(strength)
