@@ -29,7 +29,7 @@ seed (a faint tick), and:
    missed a pulse's echo; a Kalman filter gives each track's distance and closing speed.
 3. **Alerts with hysteresis.** Only surfaces the wearer moves toward count (``approach_m``
    nearer within 0.8 s, in the last second) and will not pass by: a point at lateral offset
-   ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, so a quadratic fit over the last 0.3 to 1 s
+   ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, so a quadratic fit over the last 0.3 to 0.6 s
    gives a^2, the closest point of approach; a surface is in the way when a^2 lies within
    +/- ``miss_m``^2 by two standard errors (a surface straight ahead has a = 0; the wall above a
    door, heard by way of the ceiling, or a wall beside it by way of a side wall, nears too but

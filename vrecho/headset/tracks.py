@@ -315,24 +315,21 @@ class Track:
         k = max(bisect.bisect_right(t, t[-1] - span_s) - 1, 0)
         return float(self.dists[k] - self.dists[-1])
 
-    def in_the_way(self, miss_m: float, *, spans_s=(1.0, 0.6, 0.45, 0.32), extra=None) -> bool | None:
+    def in_the_way(self, miss_m: float, *, spans_s=(0.6, 0.45, 0.32), extra=None) -> bool | None:
         """Whether the wearer will pass within ``miss_m`` of the surface (closest point of approach).
 
         A point at lateral offset ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, a quadratic in t
         (fitted to the last ``span_s``) whose minimum is a^2; a surface straight ahead has a = 0.
         The longest of ``spans_s`` that tells answers (a track may have picked up another echo's
         history where the two crossed); a span the track does not reach 0.9 of, or with fewer
-        than 8 echoes, or whose fit is not nearing at a steady pace, does not tell. What tells a
-        wall from a point aside is the curvature over the way walked within the span: a^2's
-        error goes as d^3 / (v T)^2, so a slow walker's 0.6 s (0.36 m at 0.6 m/s) could not
-        tell a wall ahead until some 0.7 m from it; a second (1 s) tells a metre or more away.
+        than 8 echoes, or whose fit is not nearing at a steady pace, does not tell.
 
         Parameters
         ----------
         miss_m : float
             The closest approach in metres beyond which the surface is not in the way.
         spans_s : tuple of float
-            The stretches of history fitted, in seconds (default 1, 0.6, 0.45 and 0.32).
+            The stretches of history fitted, in seconds (default 0.6, 0.45 and 0.32).
         extra : tuple of float, optional
             One more point (t, d), seconds and metres, after the history.
 
