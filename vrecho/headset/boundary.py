@@ -222,7 +222,7 @@ class BoundaryMonitor:
         self._ends_for, self._ends = -1, []  # the pulse whose echoes' lags _echo_ends gave, and those lags
         self._still: list[float] = []  # distances of the surfaces that stay put, at the last commit
         self._level = "clear"
-        self._pace, self._paced_at = 0.0, 0.0  # the wearer's pace, at least, and when it was judged (_judge)
+        self._pace, self._behind, self._paced_at = 0.0, 0.0, 0.0  # the wearer's pace, the walls behind's (_judge)
         self._echoes = EchoFinder(probes, fs, self.window, threshold=threshold, min_range_m=min_range_m,
                                   max_range_m=max_range_m, mic_offset_m=mic_offset_m)
         self._faint = FaintEchoes(fs, self.window, self._mic, threshold)  # (echoes too weak for one pulse: faint.py)
@@ -641,10 +641,12 @@ class BoundaryMonitor:
         self._oldest_approach = np.inf
         self._judge_at = np.inf
         # The wearer's pace, at least: the fastest any surface heard for a while nears or recedes (the
-        # wall behind recedes as the wall ahead nears). A wall converged on at 10 degrees: aside.
-        pace = max((abs(tr.speed) for tr in self._tracks if tr.speed is not None and tr.confirmed and len(tr.times) >= 8
-                    and t_pulse - tr.times[-1] < 0.4), default=0.0)  # (pulse times: the round trip ago)
-        self._pace = pace = max(pace, self._pace - (t_now - self._paced_at))  # (forgotten at 1 m/s a second)
+        # wall behind recedes as the wall ahead nears; `behind`: receding only). A wall met at 10 degrees: aside.
+        heard = [tr.speed for tr in self._tracks if tr.speed is not None and tr.confirmed and len(tr.times) >= 8
+                 and t_pulse - tr.times[-1] < 0.4]  # (pulse times: the round trip ago)
+        forgot = t_now - self._paced_at  # (forgotten at 1 m/s a second)
+        self._pace = pace = max(max(map(abs, heard), default=0.0), self._pace - forgot)
+        self._behind = behind = max(max(heard, default=0.0), self._behind - forgot)
         self._paced_at = t_now
         for tr in self._tracks:
             if tr.ahead is False or (not tr.ahead and id(tr) not in provisional and (tr.speed or 0.0) > -0.5):
@@ -661,10 +663,12 @@ class BoundaryMonitor:
                 self._oldest_approach = min(self._oldest_approach, tr.approached_at)
                 level = self._level_for(d_now, ttc, aside)
             elif (len(tr.times) >= 5 and closing >= 0.5 and at - tr.times[-5] < 0.45 and tr.score >= _LOOMING
-                  and d < self.caution_m and d / closing < 0.75 and tr.straight(8) < 0.005):
+                  and d < self.caution_m and d / closing < 0.75 and tr.straight(8) < 0.005
+                  and (behind <= closing or d * d * (1.0 - (closing / behind) ** 2) < self.miss_m ** 2)):
                 # Not yet known to be in the way (the fit needs a third of a second), but near, nearing fast
                 # and steadily beyond doubt (the score; the last eight echoes on a line within 5 mm, where a still
-                # wall's track that took another headset's pings bends; five in 0.45 s: dropouts cost pulses).
+                # wall's track that took another headset's pings bends; five in 0.45 s: dropouts cost pulses), and
+                # not passing by: nearing at c as walls behind recede at v, it lies d sqrt(1 - (c/v)^2) off the way.
                 level = "caution"
             else:
                 continue  # not known to be in the way (asked again with the echo still arriving, if any)
@@ -692,9 +696,5 @@ class BoundaryMonitor:
 _RANK = {"clear": 0, "caution": 1, "stop": 2}
 _TRUE = np.ones(8192, bool)  # every sample sound: the usual block's mask, never written to
 _ASIDE_TTC = 0.75  # (of caution_ttc_s, for a surface aside: a wall met at under 30 degrees, grazed)
-_LOOMING = 12.0
-"""The track score (its echoes' log-likelihood ratio against stray peaks) from which a surface nearing
-fast and close cautions before the fit says it is in the way."""
-_STAGE = 441
-"""Blocks of fewer samples are gathered until they make that many (10 ms at 44.1 kHz: the work
-done per block costs the same for 16 samples as for 480)."""
+_LOOMING = 12.0  # the track score from which a surface nearing fast and close cautions before the fit
+_STAGE = 441  # smaller blocks are gathered to that many (10 ms at 44.1 kHz: 16 samples cost what 480 do)
