@@ -638,18 +638,17 @@ class BoundaryMonitor:
             for tr, d, _ in associate(self._tracks, t_pulse, partial):
                 if tr is not None and tr.confirmed:  # (a surface, not stray peaks: see _commit)
                     provisional[id(tr)] = d
-        self._oldest_approach = np.inf
-        self._judge_at = np.inf
+        self._oldest_approach = self._judge_at = np.inf
         # The wearer's pace, at least: the fastest any surface heard for a while nears or recedes (the
         # wall behind recedes as the wall ahead nears; `behind`: receding only). A wall met at 10 degrees: aside.
         heard = [tr.speed for tr in self._tracks if tr.speed is not None and tr.confirmed and len(tr.times) >= 8
                  and t_pulse - tr.times[-1] < 0.4]  # (pulse times: the round trip ago)
-        forgot = t_now - self._paced_at  # (forgotten at 1 m/s a second)
+        forgot, self._paced_at = t_now - self._paced_at, t_now  # (forgotten at 1 m/s a second)
         self._pace = pace = max(max(map(abs, heard), default=0.0), self._pace - forgot)
         self._behind = behind = max(max(heard, default=0.0), self._behind - forgot)
-        self._paced_at = t_now
         for tr in self._tracks:
-            if tr.ahead is False or (not tr.ahead and id(tr) not in provisional and (tr.speed or 0.0) > -0.5):
+            if tr.ahead is False or (not tr.ahead and id(tr) not in provisional and (tr.speed or 0.0) > -0.5) \
+                    or tr.score < _ALERTING:  # (nor a surface beyond an alarm's doubt: see _ALERTING)
                 continue  # (neither in the way, nor asked again, nor nearing fast: most surfaces, cheaply)
             v = tr.speed
             d = provisional.get(id(tr), tr.dists[-1])
@@ -697,4 +696,5 @@ _RANK = {"clear": 0, "caution": 1, "stop": 2}
 _TRUE = np.ones(8192, bool)  # every sample sound: the usual block's mask, never written to
 _ASIDE_TTC = 0.75  # (of caution_ttc_s, for a surface aside: a wall met at under 30 degrees, grazed)
 _LOOMING = 12.0  # the track score from which a surface nearing fast and close cautions before the fit
+_ALERTING = 8.0  # and any alert: lines of stray peaks among other headsets' pings stay confirmed at 5 to 7
 _STAGE = 441  # smaller blocks are gathered to that many (10 ms at 44.1 kHz: 16 samples cost what 480 do)
