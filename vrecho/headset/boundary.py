@@ -14,7 +14,7 @@ seed (a faint tick), and:
    clocks' drift and the steps, and while it is not locked says "unlocked" and raises no alarm
    ("no_direct_sound" after a second: a muted loudspeaker). Another headset's pings, dithered by
    its own seed, land somewhere else every pulse, and half the time in the other code, 20 dB
-   down: no track follows them.
+   down: a line of them is rare, and short of an alarm's score (``_ALERTING``).
 1. **Ranging.** The microphone's stream is correlated with each pulse's code as it arrives (the
    envelope, :class:`~.ranging.Envelope`); each pulse's own direct sound is its time reference;
    echo peaks above the noise floor and the direct sound's sidelobes are timed to a fraction of a
