@@ -648,7 +648,7 @@ class BoundaryMonitor:
         self._behind = behind = max(max(heard, default=0.0), self._behind - forgot)
         for tr in self._tracks:
             if tr.ahead is False or (not tr.ahead and id(tr) not in provisional and (tr.speed or 0.0) > -0.5) \
-                    or tr.score < _ALERTING:  # (nor a surface beyond an alarm's doubt: see _ALERTING)
+                    or tr.score < _ALERTING:  # (or a surface not beyond an alarm's doubt: _ALERTING)
                 continue  # (neither in the way, nor asked again, nor nearing fast: most surfaces, cheaply)
             v = tr.speed
             d = provisional.get(id(tr), tr.dists[-1])
