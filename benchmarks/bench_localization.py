@@ -175,13 +175,6 @@ ENVELOPE_TUNING = ("reference", "flat 9x5", "any array", "two mics", "few poses"
 others never are: their pooled row is the held-out figure."""
 
 
-def si_sdr(ref: np.ndarray, est: np.ndarray) -> float:
-    """Scale-invariant SDR of ``est`` against ``ref`` (1-D), in dB (Le Roux et al. 2019)."""
-    a = float(np.dot(est, ref) / max(np.dot(ref, ref), 1e-30))
-    e = est - a * ref
-    return float(10 * np.log10(max(a * a * np.dot(ref, ref), 1e-30) / max(np.dot(e, e), 1e-30)))
-
-
 def envelope_room(args):
     """One walk of the envelope (:func:`vrecho.sim.arrays.envelope_walk`): positions with the count
     given (3-D and horizontal errors, the reported uncertainty), the count estimated, and the SI-SDR
@@ -194,7 +187,7 @@ def envelope_room(args):
     from scipy.optimize import linear_sum_assignment
 
     from localization import locate
-    from localization.separate import informed, passes_guard
+    from localization.separate import informed, passes_guard, si_sdr
     from vrecho.sim.arrays import envelope_walk
 
     t0 = time.perf_counter()
@@ -227,15 +220,18 @@ def envelope_room(args):
     cap, ref = sim.captures[k], sim.images[k, :, 0]
     base = [si_sdr(ref[j], cap.audio[0]) for j in range(n)]
     for name, pos in (("located", located), ("true", true)):
-        gains, kept, distinct, share = ([float("nan")] * n for _ in range(4))
+        gains, kept, before, distinct, share, remixed = ([float("nan")] * n for _ in range(6))
         have = np.all(np.isfinite(pos), axis=1)
         if have.any():
             sep = informed(cap, pos[have], guard=False)  # every track; the guard's verdict beside it
-            guarded = passes_guard(sep.distinct, sep.share)
+            guarded = passes_guard(sep.distinct, sep.share, sep.remixed)
+            unmixed = passes_guard(sep.distinct, sep.share, np.full(len(sep.share), np.inf))  # the guard before the remix's bound
             for i, j in enumerate(np.flatnonzero(have)):
                 gains[j] = si_sdr(ref[j], sep.signals[i]) - base[j]
-                kept[j], distinct[j], share[j] = bool(guarded[i]), float(sep.distinct[i]), float(sep.share[i])
+                kept[j], before[j], distinct[j], share[j] = bool(guarded[i]), bool(unmixed[i]), float(sep.distinct[i]), float(sep.share[i])
+                remixed[j] = float(sep.remixed[i])
         row[f"gain_{name}_db"], row[f"kept_{name}"], row[f"distinct_{name}"], row[f"share_{name}"] = gains, kept, distinct, share
+        row[f"kept_before_{name}"], row[f"remixed_{name}"] = before, remixed
     row["time_s"] = time.perf_counter() - t0
     return row
 
@@ -248,22 +244,25 @@ def report_envelope(rows: list[dict]) -> str:
         unc = np.array([u for r in sel for u in r["uncertainty_m"]], float)
         ok = np.isfinite(unc) & np.isfinite(pos)
 
-        def gains(name):  # every track, and as the guard leaves them (microphone 0: 0 dB); no source found: 0 dB
+        def gains(name, guard="kept"):  # every track, and as the guard leaves them (microphone 0: 0 dB); no source found: 0 dB
             g = np.array([x for r in sel for x in r[f"gain_{name}_db"]], float)
-            kept = np.array([k is True for r in sel for k in r[f"kept_{name}"]])
+            kept = np.array([k is True for r in sel for k in r[f"{guard}_{name}"]])
             g = np.where(np.isfinite(g), g, 0.0)
             return g, np.where(kept, g, 0.0), kept
         raw, guarded, kept = gains("located")
+        _, before, _ = gains("located", "kept_before")
         _, true_guarded, _ = gains("true")
         return (f"{len(sel)} / {len(pos)} | {np.median(pos):.2f} | {np.median(hor):.2f} | {np.mean(pos < 0.5):.0%} | "
                 f"{np.mean(pos[ok] <= 2 * unc[ok]):.0%} | {np.mean([r['count_found'] == len(r['sounds']) for r in sel]):.0%} | "
-                f"{np.median(guarded):+.1f} / {np.mean(guarded >= 0):.0%} | {np.mean(kept):.0%} | "
+                f"{np.median(guarded):+.1f} / {np.mean(guarded >= 0):.0%} / {np.mean(guarded):+.2f} | {np.mean(kept):.0%} | "
+                f"{np.median(before):+.1f} / {np.mean(before >= 0):.0%} / {np.mean(before):+.2f} | "
                 f"{np.median(raw):+.1f} / {np.mean(raw >= 0):.0%} | {np.median(true_guarded):+.1f} / {np.mean(true_guarded >= 0):.0%} | "
                 f"{np.mean([r['locate_s'] / r['poses'] for r in sel]):.1f} s")
     lines = ["| condition | walks / sources | 3-D median m | horizontal median m | within 0.5 m | error within 2 x uncertainty | "
-             "count right | SI-SDR gain median / >= 0 dB | tracks kept by the guard | unguarded: median / >= 0 dB | "
+             "count right | SI-SDR gain median / >= 0 dB / mean | tracks kept by the guard | "
+             "the guard without the remix: median / >= 0 dB / mean | unguarded: median / >= 0 dB | "
              "true positions (guarded): median / >= 0 dB | locate per capture |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     by = {}
     for r in rows:
         by.setdefault(r["condition"], []).append(r)

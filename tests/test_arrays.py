@@ -137,3 +137,34 @@ def test_two_low_tones_on_a_small_array_give_the_microphone_flagged():
     assert kept.separated.all() and not np.array_equal(kept.signals[0], cap.audio[0])
     placed = place_sources(sim.captures, 2, bounds=((0, 0, 0), (4.5, 4.5, 2.7)))
     assert placed and all(p.flags and p.flags[0].startswith("not separated in") for p in placed)
+
+
+def test_a_track_the_separation_cannot_take_back_out_of_its_own_remix_is_the_microphone():
+    """Informed separation with both sources where they are keeps both tracks (each better than
+    the microphone); told the music is 3 m from where it plays, the voice's track would come out
+    worse than the microphone, and the remix says so: separated again from a mixture of its own
+    tracks, the voice's comes back only a few dB over it, so microphone 0 is given instead."""
+    from localization import informed
+    from localization.capture import FS
+    from localization.separate import GUARD, si_sdr
+    from vrecho.sim.ambient import AmbientSource, Shoebox, simulate_walk_capture
+    from vrecho.sim.arrays import head_pose
+    from vrecho.sim.sounds import ambient_sound
+
+    rng = np.random.default_rng(3)
+    poses = [head_pose(np.array([1.5 + 0.4 * k, 1.5, 1.5]), np.radians(40 * k), 0.0, 0.0) for k in range(3)]
+    sources = [AmbientSource(np.array([3.5, 3.0, 1.2]), ambient_sound("speech", 4.6, FS, rng), "speech"),
+               AmbientSource(np.array([0.7, 3.4, 1.6]), ambient_sound("music", 4.6, FS, rng), "music")]
+    sim = simulate_walk_capture(Shoebox((4.5, 4.5, 2.7), 0.3), sources, poses, rng, segment_s=1.5)
+    cap, ref = sim.captures[1], sim.images[1, :, 0]
+
+    def gains(sep):
+        return [si_sdr(ref[j], sep.signals[j]) - si_sdr(ref[j], cap.audio[0]) for j in range(2)]
+    right = informed(cap, np.array([s.position for s in sources]))
+    assert right.separated.all() and np.all(right.remixed >= GUARD["remixed_db"]) and min(gains(right)) > 1.0
+    wrong = np.array([sources[0].position, [3.8, 0.6, 2.2]])
+    unguarded = informed(cap, wrong, guard=False)
+    assert gains(unguarded)[0] < 0.0  # what the voice's track would have been
+    guarded = informed(cap, wrong)
+    assert guarded.remixed[0] < GUARD["remixed_db"] and not guarded.separated[0]
+    assert np.array_equal(guarded.signals[0], cap.audio[0])
