@@ -190,8 +190,13 @@ def envelope_room(args):
     from localization.separate import informed, passes_guard, si_sdr
     from vrecho.sim.arrays import envelope_walk
 
+    from vrecho.errors import VrechoError
+
     t0 = time.perf_counter()
-    walk = envelope_walk(np.random.default_rng(seed), condition, cache=os.environ.get("VRECHO_CACHE"))
+    try:
+        walk = envelope_walk(np.random.default_rng(seed), condition, cache=os.environ.get("VRECHO_CACHE"))
+    except VrechoError as e:  # a seed whose room, walk and sources do not fit: said, not counted
+        return {"condition": condition, "seed": seed, "skipped": str(e)}
     sim = walk.sim
     true = np.array([s.position for s in sim.sources])
     n = len(true)
@@ -368,15 +373,18 @@ def main():
         work = [(c, a.envelope_seed + 1000 * CONDITIONS.index(c) + i) for i in range(a.envelope) for c in conditions]
         envelope = list(tqdm(pool.imap_unordered(envelope_room, work), total=len(work), desc="envelope walks"))
     envelope.sort(key=lambda r: (CONDITIONS.index(r["condition"]), r["seed"]))
+    skipped = [r for r in envelope if "skipped" in r]
+    envelope = [r for r in envelope if "skipped" not in r]
     parts = ([report(rows)] if rows else []) + ([report_target(target, a.seed)] if target else [])
     if envelope:
         parts.append(f"The operating envelope: {a.envelope} walks per condition (seeds {a.envelope_seed} + 1000 x the "
                      f"condition's number + i)\n\n" + report_envelope(envelope))
-    text = "\n\n".join(parts)
+    text = "\n\n".join(parts + [f"Skipped: {r['condition']}, seed {r['seed']}: {r['skipped']}" for r in skipped])
     print(text)
     print(f"\n{0 if a.only_envelope else a.rooms} rooms, seed {a.seed}, {time.time() - t0:.0f} s with {a.jobs} processes")
     a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text(json.dumps({"seed": a.seed, "rows": rows, "target_rows": target, "envelope_rows": envelope}, indent=1))
+    a.out.write_text(json.dumps({"seed": a.seed, "rows": rows, "target_rows": target, "envelope_rows": envelope,
+                                 "skipped": skipped}, indent=1))
 
 
 if __name__ == "__main__":
