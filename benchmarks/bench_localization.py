@@ -188,9 +188,8 @@ def envelope_room(args):
 
     from localization import locate
     from localization.separate import informed, passes_guard, si_sdr
-    from vrecho.sim.arrays import envelope_walk
-
     from vrecho.errors import VrechoError
+    from vrecho.sim.arrays import envelope_walk
 
     t0 = time.perf_counter()
     try:

@@ -338,8 +338,10 @@ def informed(capture: Capture, positions: np.ndarray, *, guard: bool = True) -> 
     # The remix: the tracks' own images summed, separated again; how much of each track comes back
     # (its SI-SDR gain over the remix's microphone 0) says whether the network and the filter knew
     # the source or guessed (Informed.remixed).
-    again, _, _ = _images(remix, A, images=False)
-    mine, back, mix = synthesis(out, audio.shape[1], nfft), synthesis(again, audio.shape[1], nfft), synthesis(remix[..., :1], audio.shape[1], nfft)[0]
+    again, _, _ = _images(remix, A)
+    length = audio.shape[1]
+    mine, back = synthesis(out, length, nfft), synthesis(again, length, nfft)
+    mix = synthesis(remix[..., :1], length, nfft)[0]
     remixed = np.array([si_sdr(mine[k], back[k]) - si_sdr(mine[k], mix) for k in range(len(positions))])
     power = np.abs(X[..., 0]) ** 2  # (T, F)
     total = power.sum() + 1e-30
@@ -362,26 +364,22 @@ def informed(capture: Capture, positions: np.ndarray, *, guard: bool = True) -> 
     return Informed(y, keep, distinct, mass, remixed)
 
 
-def _images(X: np.ndarray, A: np.ndarray, *, images: bool = True):
+def _images(X: np.ndarray, A: np.ndarray):
     """The multichannel Wiener filter on the network's shares (the module's docstring).
 
-    Returns each source's spectrum at microphone 0 (T, F, K), the shares (T, F, K) and, where
-    ``images``, the sum of the sources' images at every microphone (T, F, M): the remix."""
+    Returns each source's spectrum at microphone 0 (T, F, K), the shares (T, F, K) and the sum
+    of the sources' images at every microphone (T, F, M): the remix."""
     share = masknet.source_masks(X, A)
     n_frames, _, m = X.shape
     Rx = np.einsum("tfm,tfn->fmn", X, np.conj(X)) / n_frames
     iRx = np.linalg.inv(Rx + 1e-9 * np.trace(Rx, axis1=-2, axis2=-1).real.mean() * np.eye(m))
     out = np.zeros(share.shape, dtype=complex)
-    remix = np.zeros(X.shape, dtype=complex) if images else None
+    remix = np.zeros(X.shape, dtype=complex)
     for k in range(share.shape[-1]):
         Rk = np.einsum("tf,tfm,tfn->fmn", share[..., k] ** 2, X, np.conj(X)) / n_frames
-        gain = np.sqrt(share[..., k])
-        if images:
-            img = np.einsum("fin,tfn->tfi", Rk @ iRx, X) * gain[..., None]
-            out[..., k] = img[..., 0]
-            remix += img
-        else:
-            out[..., k] = np.einsum("fn,tfn->tf", (Rk @ iRx)[:, 0], X) * gain
+        img = np.einsum("fin,tfn->tfi", Rk @ iRx, X) * np.sqrt(share[..., k])[..., None]
+        out[..., k] = img[..., 0]
+        remix += img
     return out, share, remix
 
 
