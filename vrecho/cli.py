@@ -274,23 +274,24 @@ def main(argv: list[str] | None = None) -> int:
     2
     """
     args = build_parser().parse_args(argv)
+    status = 2
     try:
         args.func(args)
         return 0
     except VrechoError as e:
-        print(f"vrecho: error: {e}", file=sys.stderr)
+        line = f"vrecho: error: {e}"
     except OSError as e:  # what no check can foresee: a file that vanished, a disk that filled meanwhile
         where = f"{e.filename}: " if e.filename else ""
-        print(f"vrecho: error: {where}{e.strerror or e}", file=sys.stderr)
+        line = f"vrecho: error: {where}{e.strerror or e}"
     except MemoryError:
-        print("vrecho: error: out of memory (a smaller scene, fewer frames or a machine with more memory)",
-              file=sys.stderr)
+        line = "vrecho: error: out of memory (a smaller scene, fewer frames or a machine with more memory)"
     except KeyboardInterrupt:
-        print("vrecho: interrupted; " + ("finished work is kept: rerun the same command to resume"
-                                         if getattr(args, "resumable", False) else "nothing was written"),
-              file=sys.stderr)
-        return 130
-    return 2
+        status = 130
+        line = "vrecho: interrupted; " + ("finished work is kept: rerun the same command to resume"
+                                          if getattr(args, "resumable", False) else "nothing was written")
+    cluster.disconnect()  # Ray's shutdown lines, if any, before vrecho's own last line
+    print(line, file=sys.stderr)
+    return status
 
 
 if __name__ == "__main__":

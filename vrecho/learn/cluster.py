@@ -27,6 +27,7 @@ import functools
 import itertools
 import os
 import socket
+import sys
 import tempfile
 import threading
 from pathlib import Path
@@ -83,6 +84,18 @@ def connect(address: str):
         raise VrechoError(f"ray: no Ray cluster answers at {address!r} ({str(e).splitlines()[0] if str(e) else type(e).__name__}); "
                           "start one with `ray start --head`, or pass --ray auto for one on this machine") from None
     return ray
+
+
+def disconnect() -> None:
+    """Leave Ray, where this process joined it (a local cluster started here stops with it).
+
+    The command line calls it before its last line (an error, an interrupt), so that what Ray's
+    core prints while it shuts down (tasks cut off, replies it could not deliver) comes before
+    vrecho's line, not after it. Nothing happens where Ray was never imported or connected.
+    """
+    ray = sys.modules.get("ray")
+    if ray is not None and ray.is_initialized():
+        ray.shutdown()
 
 
 def add_argument(parser, does: str) -> None:
