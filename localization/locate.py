@@ -13,7 +13,10 @@ Two ways, compared side by side in ``benchmarks/bench_localization.py``:
   point on a 10 cm grid, refined to a few millimetres; then each bin gives up its vote as far as
   that source explains it (weight times 1 - score^2), and the next map is made, away from the
   sources found (sources closer than 0.75 m are one to this array). Without a given count, a next peak
-  weaker than ``min_strength`` times the first ends the search. Each position's standard error
+  weaker than ``min_strength`` times the first ends the search. Then each source is sought
+  again, the whole grid over, with the others explained (:data:`CYCLES`): the first was placed
+  on a map the others still voted on, where a crossing of two sources' directions or a hum's
+  grating lobes can outvote the truth. Each position's standard error
   comes from triangulating each capture's own best direction near it (least squares); the
   directions reported per capture point at the joint positions.
 
@@ -58,6 +61,8 @@ BAND_HZ = (200.0, 7000.0)
 NFFT = 512
 """STFT length for direction finding (32 ms at 16 kHz), hop NFFT / 2."""
 MIN_SEPARATION_M = 0.75
+CYCLES = 1
+"""Rounds in which :func:`locate` searches for each source found again, the others explained."""
 MIN_RANGE_M = 0.05
 """No source is sought closer than this to a capture's array centre: it has no direction there."""
 MAX_SOURCES = 8
@@ -67,10 +72,9 @@ MAX_GRID_POINTS = 5_000_000
 """The most points of the search grid (a 0.1 m grid over a box of 50 x 50 x 20 m): beyond it
 the maps would take gigabytes; a coarser ``step_m`` or tighter ``bounds`` keeps under it."""
 FALSE_ALARM = 1e-3
+"""The chance, over the whole search, that incoherent noise alone gives a source."""
 SCRAMBLES = 19
 """How many times each capture's map is turned at random for the agreement test."""
-
-"""The chance, over the whole search, that incoherent noise alone gives a source."""
 BIN_OVERLAP = 2.0
 """How many onset bins count as one independent draw in the null bound: neighbouring frames
 overlap by half and neighbouring frequencies leak into each other through the Hann window."""
@@ -385,6 +389,11 @@ class Votes:
     def _maps(self):
         self.maps = [(w @ v) / max(len(w), 1) for v, w in zip(self.votes, self.weights)]
 
+    def reset(self):
+        """Every bin's whole vote back (undo :meth:`explain`)."""
+        self.weights = [np.ones(len(v), dtype=np.float32) for v in self.votes]
+        self._maps()
+
     def null_peak(self, n_points: int) -> float:
         """The world map's value that incoherent noise reaches anywhere on ``n_points`` points
         with a chance of at most :data:`FALSE_ALARM` (see the module's docstring).
@@ -566,6 +575,8 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
         found.append(x)
         strength.append(float(votes.power(x[None])[0]))
         votes.explain(x)
+    if len(found) >= 2:
+        found, strength = _cycle(votes, grid, lo, hi, step_m, found)
     votes.maps = every_vote
     centers = np.array([c.center for c in captures])
     positions = np.array(found).reshape(-1, 3)
@@ -581,6 +592,30 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
     d = positions[None] - centers[:, None]
     return Located(positions, np.linalg.norm(unc, axis=1), np.array(strength) / max(strength[:1], default=1.0),
                    d / np.linalg.norm(d, axis=-1, keepdims=True), agreement, unc)
+
+
+def _cycle(votes: "Votes", grid: np.ndarray, lo, hi, step_m: float, found: list) -> tuple[list, list]:
+    """Each source searched for again with the others explained (:data:`CYCLES` rounds), the
+    whole grid over: the greedy search placed the first source on a map the others still voted
+    on (a crossing of two sources' directions, or a hum's grating lobes, can outvote the
+    truth there) and each later one on what its predecessors' explanation left. Returns the
+    positions and their strengths, taken in order as the greedy search takes them."""
+    found = list(found)
+    for _ in range(CYCLES):
+        for i in range(len(found)):
+            others = found[:i] + found[i + 1:]
+            votes.reset()
+            for y in others:
+                votes.explain(y)
+            p = _power(votes, grid, others)
+            if np.isfinite(p.max()):
+                found[i] = _refine(votes, grid[int(np.argmax(p))], lo, hi, step_m, others)
+    votes.reset()
+    strength = []
+    for x in found:
+        strength.append(float(votes.power(x[None])[0]))
+        votes.explain(x)
+    return found, strength
 
 
 def _turned_peak(votes: "Votes", grid: np.ndarray) -> float:
