@@ -16,7 +16,8 @@ Two ways, compared side by side in ``benchmarks/bench_localization.py``:
   weaker than ``min_strength`` times the first ends the search. Then each source is sought
   again, the whole grid over, with the others explained (:data:`CYCLES`): the first was placed
   on a map the others still voted on, where a crossing of two sources' directions or a hum's
-  grating lobes can outvote the truth. Each position's standard error
+  grating lobes can outvote the truth. A source moves only where the sources together then
+  explain more of the captures' clear votes (:meth:`Votes.explained`). Each position's standard error
   comes from triangulating each capture's own best direction near it (least squares); the
   directions reported per capture point at the joint positions.
 
@@ -63,6 +64,8 @@ NFFT = 512
 MIN_SEPARATION_M = 0.75
 CYCLES = 1
 """Rounds in which :func:`locate` searches for each source found again, the others explained."""
+GUARD = True
+"""A source sought again moves only where the sources together explain more of the votes."""
 MIN_RANGE_M = 0.05
 """No source is sought closer than this to a capture's array centre: it has no direction there."""
 MAX_SOURCES = 8
@@ -389,6 +392,30 @@ class Votes:
     def _maps(self):
         self.maps = [(w @ v) / max(len(w), 1) for v, w in zip(self.votes, self.weights)]
 
+    def explained(self, points) -> float:
+        """How much of the captures' clear votes sources at ``points`` account for together
+        (whatever their order: each bin keeps the product of what each leaves it, as
+        :meth:`explain` does): the sum over captures of the mean over bins of the bin's best vote
+        times the share of it withdrawn.
+
+        Parameters
+        ----------
+        points : list of numpy.ndarray [shape=(3,)]
+
+        Returns
+        -------
+        float
+        """
+        total = 0.0
+        for k in range(len(self.captures)):
+            if not len(self.votes[k]):
+                continue
+            left = np.ones(len(self.votes[k]), dtype=np.float32)
+            for x in points:
+                left *= 1.0 - self._scores(k, x) ** 2
+            total += float(np.mean(self.votes[k].max(axis=1) * (1.0 - left)))
+        return total
+
     def reset(self):
         """Every bin's whole vote back (undo :meth:`explain`)."""
         self.weights = [np.ones(len(v), dtype=np.float32) for v in self.votes]
@@ -497,11 +524,14 @@ class Votes:
         point : numpy.ndarray [shape=(3,)]
             The source's world position in metres.
         """
-        for k, c in enumerate(self.captures):
-            u = (point - c.center) / np.linalg.norm(point - c.center)
-            score = self.votes[k][:, int(np.argmax(self.dirs @ u))] ** (1.0 / self.GAMMA)
-            self.weights[k] *= 1.0 - score ** 2
+        for k in range(len(self.captures)):
+            self.weights[k] *= 1.0 - self._scores(k, point) ** 2
         self._maps()
+
+    def _scores(self, k: int, point: np.ndarray) -> np.ndarray:
+        """Capture ``k``'s bins' scores toward the grid direction nearest ``point``."""
+        u = (point - self.captures[k].center) / np.linalg.norm(point - self.captures[k].center)
+        return self.votes[k][:, int(np.argmax(self.dirs @ u))] ** (1.0 / self.GAMMA)
 
 
 def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float = 0.1,
@@ -609,7 +639,9 @@ def _cycle(votes: "Votes", grid: np.ndarray, lo, hi, step_m: float, found: list)
                 votes.explain(y)
             p = _power(votes, grid, others)
             if np.isfinite(p.max()):
-                found[i] = _refine(votes, grid[int(np.argmax(p))], lo, hi, step_m, others)
+                x = _refine(votes, grid[int(np.argmax(p))], lo, hi, step_m, others)
+                if not GUARD or votes.explained(others + [x]) > votes.explained(found):
+                    found[i] = x
     votes.reset()
     strength = []
     for x in found:
