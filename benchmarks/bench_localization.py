@@ -81,7 +81,7 @@ def one_room(args):
     from scipy.signal import resample_poly
 
     from localization import doa, locate
-    from localization.locate import PRA_METHODS
+    from localization.doa import PRA_METHODS
     from vrecho.classifier import load_classifier
 
     n_src, rt60 = main_condition(index, n_rooms)

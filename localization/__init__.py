@@ -2,7 +2,7 @@
 
 - :class:`Capture` (capture.py): a stretch of multichannel recording at one device pose (the
   simulator makes them in :mod:`vrecho.sim.ambient`).
-- :func:`locate` (locate.py): world positions from all captures at once; :func:`doa`:
+- :func:`locate` (locate.py): world positions from all captures at once; :func:`doa` (doa.py):
   pyroomacoustics' direction finders on one capture.
 - :func:`separate` (separate.py): pyroomacoustics' AuxIVA, ILRMA, FastMNMF2, a single-channel
   NMF, and vrecho's separation informed by the positions: masknet.py's network gives each
@@ -21,7 +21,8 @@ from tqdm import tqdm
 from vrecho.errors import VrechoError, check_count
 
 from .capture import Capture
-from .locate import MAX_SOURCES, Located, check_captures, doa, locate
+from .doa import doa
+from .locate import MAX_SOURCES, Located, check_captures, locate
 from .separate import SEPARATORS, informed, separate, steering
 from .sources import PlacedSource
 

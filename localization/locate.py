@@ -83,10 +83,6 @@ BIN_OVERLAP = 2.0
 overlap by half and neighbouring frequencies leak into each other through the Hann window."""
 ONSET_FRAMES = 3
 ONSET_RATIO = 2.0
-MAX_DOA_GRID = 100_000
-"""The most points of :func:`doa`'s sphere grid (0.7 degrees apart)."""
-PRA_METHODS: tuple[str, ...] = ("MUSIC", "NormMUSIC", "SRP", "CSSM", "WAVES", "TOPS")
-"""pyroomacoustics' grid-based DOA methods (FRIDA works in the plane only)."""
 
 
 @dataclass
@@ -182,7 +178,20 @@ def stft(audio: np.ndarray, *, nfft: int = NFFT) -> np.ndarray:
     return np.fft.rfft(frames, axis=-1).transpose(0, 2, 1)
 
 
-def _band(fs: int, nfft: int = NFFT) -> np.ndarray:
+def band_bins(fs: int, nfft: int = NFFT) -> np.ndarray:
+    """Which of an ``nfft``-point STFT's bins at ``fs`` lie in :data:`BAND_HZ` (and under 0.45 ``fs``).
+
+    Parameters
+    ----------
+    fs : int
+        The sample rate in Hz.
+    nfft : int
+        The STFT's length (default :data:`NFFT`).
+
+    Returns
+    -------
+    numpy.ndarray [shape=(nfft // 2 + 1,), dtype=bool]
+    """
     f = np.fft.rfftfreq(nfft, 1 / fs)
     return (f >= BAND_HZ[0]) & (f <= min(BAND_HZ[1], 0.45 * fs))
 
@@ -365,7 +374,7 @@ class Votes:
         self.el = np.radians(np.arange(-self.EL_MAX, self.EL_MAX + 1e-9, self.EL_STEP))
         A, E = np.meshgrid(self.az, self.el, indexing="ij")
         self.dirs = np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], -1).reshape(-1, 3)
-        band = _band(FS) & (np.fft.rfftfreq(NFFT, 1 / FS) <= 0.45 * captures[0].fs)  # (an 8 kHz capture: to 3.6 kHz)
+        band = band_bins(FS) & (np.fft.rfftfreq(NFFT, 1 / FS) <= 0.45 * captures[0].fs)  # (an 8 kHz capture: to 3.6 kHz)
         freqs = np.fft.rfftfreq(NFFT, 1 / FS)[band]
         self.votes, self.weights = [], []
         for c in captures:
@@ -666,65 +675,3 @@ def _turned_peak(votes: "Votes", grid: np.ndarray) -> float:
     finally:
         votes.maps = maps
     return max(best, 1e-30)
-
-
-def doa(capture: Capture, n_sources: int, *, method: str = "NormMUSIC", n_grid: int = 6000,
-        n_freq: int | None = None) -> np.ndarray:
-    """Directions of the sources one capture hears, by a pyroomacoustics method.
-
-    Parameters
-    ----------
-    capture : Capture
-        The capture, with at least 2 microphones.
-    n_sources : int
-        How many directions to give, 1 to :data:`MAX_SOURCES`; MUSIC, NormMUSIC, CSSM, WAVES
-        and TOPS find fewer sources than microphones.
-    method : str
-        One of :data:`PRA_METHODS` (default "NormMUSIC").
-    n_grid : int
-        The number of points of the sphere grid searched, 100 to :data:`MAX_DOA_GRID` (default
-        6000).
-    n_freq : int, optional
-        Use only that many frequency bins (2 to the band's), evenly spread over the band
-        :data:`BAND_HZ` (CSSM, WAVES and TOPS take about 20 s per capture on all of them);
-        None: the whole band.
-
-    Returns
-    -------
-    numpy.ndarray [shape=(n_sources, 3)]
-        Unit vectors from the array centre (world frame); where the method finds fewer peaks
-        than asked, the strongest is repeated.
-
-    Raises
-    ------
-    VrechoError
-        For a bad capture, an unknown method, an ``n_sources``, ``n_grid`` or ``n_freq`` out of
-        its range, or too many sources for the method.
-    """
-    import pyroomacoustics as pra  # heavy (1.4 s to import): only where it simulates or analyses
-
-    if not isinstance(capture, Capture):
-        raise VrechoError(f"capture: expected a localization.Capture, got {type(capture).__name__}")
-    (capture,) = check_captures([capture])
-    if method not in PRA_METHODS:
-        raise VrechoError(f"method: expected one of {PRA_METHODS}, got {method!r}")
-    check_count(n_sources, "n_sources", MAX_SOURCES)
-    if method in ("MUSIC", "NormMUSIC", "CSSM", "WAVES", "TOPS") and n_sources >= capture.n_mics:
-        raise VrechoError(f"{method} finds fewer sources than microphones: {n_sources} sources with "
-                          f"{capture.n_mics} microphones")
-    check_count(n_grid, "n_grid", MAX_DOA_GRID, 100)
-    if n_freq is not None:  # TOPS, CSSM and WAVES fail on a single frequency
-        check_count(n_freq, "n_freq", int(np.sum(_band(capture.fs))), 2)
-    L = (capture.mics - capture.center).T
-    X = stft(capture.audio)
-    d = pra.doa.algorithms[method](L, capture.fs, NFFT, c=SPEED_OF_SOUND, num_src=n_sources, dim=3, n_grid=n_grid)
-    if n_freq is None:
-        d.locate_sources(X, freq_range=list(BAND_HZ))
-    else:
-        bins = np.flatnonzero(_band(capture.fs))
-        d.locate_sources(X, freq_bins=bins[np.linspace(0, len(bins) - 1, n_freq).round().astype(int)])
-    az, col = np.asarray(d.azimuth_recon), np.asarray(d.colatitude_recon)
-    out = np.stack([np.cos(az) * np.sin(col), np.sin(az) * np.sin(col), np.cos(col)], -1)
-    if len(out) < n_sources:  # fewer peaks than asked: repeat the strongest
-        out = np.vstack([out, np.repeat(out[:1], n_sources - len(out), axis=0)])
-    return out
