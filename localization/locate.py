@@ -102,7 +102,8 @@ class Located:
         (:data:`AMBIGUOUS_SHARE` of the peak): a flat array at one height hears a source above
         it as one below it, and says so on z until the head's pitch and roll tell them apart.
     strength : numpy.ndarray [shape=(K,)]
-        Each source's share of the map's peak power (the first is 1).
+        Each source's map power at its position, the sources before it explained, over the
+        first's (the first is 1; a source moved by the second look may exceed it).
     agreement : float
         The world map's peak over the best peak of the captures' maps each turned at random
         (the module's docstring; NaN for a single capture or where no source was found).
