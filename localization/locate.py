@@ -63,9 +63,8 @@ NFFT = 512
 """STFT length for direction finding (32 ms at 16 kHz), hop NFFT / 2."""
 MIN_SEPARATION_M = 0.75
 CYCLES = 1
-"""Rounds in which :func:`locate` searches for each source found again, the others explained."""
-GUARD = True
-"""A source sought again moves only where the sources together explain more of the votes."""
+"""Rounds in which :func:`locate` searches for each source found again, the others explained
+(it moves only where the sources together then explain more of the votes)."""
 MIN_RANGE_M = 0.05
 """No source is sought closer than this to a capture's array centre: it has no direction there."""
 MAX_SOURCES = 8
@@ -641,6 +640,7 @@ def _cycle(votes: "Votes", grid: np.ndarray, lo, hi, step_m: float, found: list)
     truth there) and each later one on what its predecessors' explanation left. Returns the
     positions and their strengths, taken in order as the greedy search takes them."""
     found = list(found)
+    explained = votes.explained(found)
     for _ in range(CYCLES):
         for i in range(len(found)):
             others = found[:i] + found[i + 1:]
@@ -650,8 +650,9 @@ def _cycle(votes: "Votes", grid: np.ndarray, lo, hi, step_m: float, found: list)
             p = _power(votes, grid, others)
             if np.isfinite(p.max()):
                 x = _refine(votes, grid[int(np.argmax(p))], lo, hi, step_m, others)
-                if not GUARD or votes.explained(others + [x]) > votes.explained(found):
+                if votes.explained(others + [x]) > explained:
                     found[i] = x
+                    explained = votes.explained(found)
     votes.reset()
     strength = []
     for x in found:
