@@ -33,7 +33,8 @@ class Alert:
         What was wrong with the input so far in this block ("nan", "dropout", "clipped"), and
         the monitor's state: "unlocked" (its own direct sound not found yet, or lost after the
         round trip changed: no alarm then), "no_direct_sound" (unlocked for over a second: the
-        loudspeaker muted, the microphone off?), "no_echo".
+        loudspeaker muted, the microphone off?), "no_echo" (no surface heard: no echo
+        confirmed over several pulses, stray peaks aside).
     pulse_time_s : float or None
         When (seconds, on the stream's clock, from the first sample) the pulse that measured
         ``distance_m`` was written to the loudspeaker.

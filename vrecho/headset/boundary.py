@@ -683,7 +683,7 @@ class BoundaryMonitor:
             self._level = "clear"
             moving = any(abs(tr.closed_in(0.8)) >= self.approach_m for tr in self._tracks)
             self._verdict = Alert("clear", None, "opening" if moving else None, 0.0, None, None,
-                                  () if self._tracks else ("no_echo",))
+                                  () if any(tr.confirmed for tr in self._tracks) else ("no_echo",))
         else:
             d, closing, ttc, tr, at, level = best
             self._level = level

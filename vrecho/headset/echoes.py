@@ -15,6 +15,15 @@ from .kernels import echo_distance, echo_peaks
 from .ranging import GUARD, Envelope, at_rail
 
 
+RINGING_DB_PER_MS = 20.0
+"""How fast the floor beside the direct sound falls past one code's length, in dB per
+millisecond: a transducer's ringing decays by 8.7 dB per time constant Q / (pi f), 0.4 ms for a
+resonance of Q 5 at 4 kHz, the codes' lowest frequency (a small loudspeaker's resonances in the
+codes' band, 4 to 20 kHz, are that damped or more). Before it fell only 6 dB per doubling of
+the lag, and hid echoes 45 to 55 dB under a loud direct sound 1 to 1.5 m out (a headset whose
+loudspeaker faces away from the wearer's way)."""
+
+
 class EchoFinder:
     """A pulse's echoes in the envelope: peaks above the noise floor (``threshold`` times the
     envelope's median) and above the direct sound's sidelobes (when the direct sound is clipped,
@@ -54,10 +63,14 @@ class EchoFinder:
         self._clipped_floors: dict[tuple[int, int], np.ndarray] = {}
         self.last: tuple = ()
         # The direct sound's sidelobes by lag: 6 dB above the codes' own (the matched filter's
-        # response to the code itself), and never below a floor falling from -32 dB (a real
-        # loudspeaker's and microphone's own ringing).
-        lag = np.arange(window + len(self.probes[0]), dtype=float)
-        floor = 10 ** (-(32 + 6 * np.log2(np.maximum(lag, 1) / (0.0025 * fs) + 1)) / 20)
+        # response to the code itself), and never below a floor falling from -32 dB: what a real
+        # loudspeaker's distortion spreads over one code's length after its peak (the matched
+        # filter's response to a distorted copy ends there), and past it the transducers' own
+        # ringing, decaying by RINGING_DB_PER_MS.
+        m = len(self.probes[0])
+        lag = np.arange(window + m, dtype=float)
+        floor = 10 ** (-(32 + 6 * np.log2(np.maximum(lag, 1) / (0.0025 * fs) + 1)
+                         + RINGING_DB_PER_MS * 1000.0 * np.maximum(lag - m, 0.0) / fs) / 20)
         own = np.max([self._response(p, len(lag)) for p in self.probes], axis=0)  # (doubled: 6 dB of slack)
         self._sidelobe = np.maximum(floor, own)
         reach = int(np.flatnonzero(own > 10 ** (-40 / 20))[-1]) + 1  # an echo's own sidelobes above -40 dB
