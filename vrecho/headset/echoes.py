@@ -17,11 +17,14 @@ from .ranging import GUARD, Envelope, at_rail
 
 RINGING_DB_PER_MS = 20.0
 """How fast the floor beside the direct sound falls past one code's length, in dB per
-millisecond: a transducer's ringing decays by 8.7 dB per time constant Q / (pi f), 0.4 ms for a
-resonance of Q 5 at 4 kHz, the codes' lowest frequency (a small loudspeaker's resonances in the
-codes' band, 4 to 20 kHz, are that damped or more). Before it fell only 6 dB per doubling of
-the lag, and hid echoes 45 to 55 dB under a loud direct sound 1 to 1.5 m out (a headset whose
-loudspeaker faces away from the wearer's way)."""
+millisecond. Within that length lies what a loudspeaker's distortion of the code spreads (the
+matched filter's response to a distorted copy ends there); past it only the transducers' own
+ringing, which decays by 8.7 dB per time constant Q / (pi f): 0.4 ms, some 22 dB a millisecond,
+for a resonance of Q 5 at 4 kHz, the codes' lowest frequency. A transducer that rang longer
+would read as a still surface just beyond 0.85 m, which does not approach and so does not alert.
+The floor used to fall 6 dB per doubling of the lag all the way, and hid echoes 45 to 55 dB
+under a loud direct sound 1 to 1.5 m out (a loudspeaker facing away from the wearer's way, in
+a quiet room)."""
 
 
 class EchoFinder:
