@@ -396,6 +396,7 @@ class Votes:
             votes = np.concatenate(rows) if rows else np.zeros((0, len(self.dirs)), np.float32)
             self.votes.append(votes)
             self.weights.append(np.ones(len(votes), dtype=np.float32))
+        self._best = [v.max(axis=1) for v in self.votes]  # each bin's best vote (explained)
         self._maps()
 
     def _maps(self):
@@ -422,7 +423,7 @@ class Votes:
             left = np.ones(len(self.votes[k]), dtype=np.float32)
             for x in points:
                 left *= 1.0 - self._scores(k, x) ** 2
-            total += float(np.mean(self.votes[k].max(axis=1) * (1.0 - left)))
+            total += float(np.mean(self._best[k] * (1.0 - left)))
         return total
 
     def reset(self):
