@@ -651,9 +651,9 @@ def _cycle(votes: "Votes", grid: np.ndarray, lo, hi, step_m: float, found: list)
             p = _power(votes, grid, others)
             if np.isfinite(p.max()):
                 x = _refine(votes, grid[int(np.argmax(p))], lo, hi, step_m, others)
-                if votes.explained(others + [x]) > explained:
-                    found[i] = x
-                    explained = votes.explained(found)
+                moved = votes.explained(others + [x])  # (order-free: what found explains once x is in it)
+                if moved > explained:
+                    found[i], explained = x, moved
     votes.reset()
     strength = []
     for x in found:

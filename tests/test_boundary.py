@@ -48,10 +48,10 @@ def door():
     return _walk("open")
 
 
-def _run(walk, mic=None, sizes=None, rng=None, frames=()):
-    """The monitor over a walk, in blocks; ``frames``: (time, gray, depth, intrinsics) shown to
-    it once the block that reaches their time has been processed."""
-    mon = _monitor()
+def _run(walk, mic=None, sizes=None, rng=None, frames=(), **settings):
+    """The monitor (``settings`` its own) over a walk, in blocks; ``frames``: (time, gray, depth,
+    intrinsics) shown to it once the block that reaches their time has been processed."""
+    mon = _monitor(**settings)
     x = walk.mic if mic is None else mic
     frames = list(frames)
     alerts, ends, i = [], [], 0
@@ -207,14 +207,9 @@ def test_a_loudspeaker_facing_away_in_a_quiet_room_is_warned_in_time():
     for seed in range(2):
         walk = simulate_walk(scene, start, target, 1.3, _monitor().schedule, plane, np.random.default_rng(seed),
                              headset=away, stop_m=0.15, snr_db=45.0)
-        mon = _monitor(mic_offset_m=away.mic_offset_m)
-        first, i = None, 0
-        while first is None and i < len(walk.mic):
-            block = walk.mic[i:i + 480]
-            i += len(block)
-            if mon.process(block, np.zeros(len(block))).level != "clear":
-                first = walk.distance_at(i / FS)
-        assert first is not None and first >= 0.8, first
+        _, alerts, ends = _run(walk, mic_offset_m=away.mic_offset_m)
+        a, _, at = _first(alerts, ends, walk, ("caution", "stop"))
+        assert a is not None and at >= 0.8, at
 
 
 def test_no_echo_at_all_is_clear_and_says_so():
