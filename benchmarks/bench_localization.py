@@ -179,7 +179,8 @@ def envelope_room(args):
     """One walk of the envelope (:func:`vrecho.sim.arrays.envelope_walk`): positions with the count
     given (3-D and horizontal errors, the reported uncertainty), the count estimated, and the SI-SDR
     gain over microphone 0 of each source's informed separation (located and true positions) on
-    the walk's middle capture."""
+    the walk's middle capture: every track as separated, and as the guard gives it (microphone 0,
+    or the track mixed with it: :func:`localization.separate.track_weights`)."""
     condition, seed = args
     import torch
 
@@ -187,7 +188,7 @@ def envelope_room(args):
     from scipy.optimize import linear_sum_assignment
 
     from localization import locate
-    from localization.separate import informed, passes_guard, si_sdr
+    from localization.separate import informed, si_sdr, track_weights
     from vrecho.errors import VrechoError
     from vrecho.sim.arrays import envelope_walk
 
@@ -224,18 +225,19 @@ def envelope_room(args):
     cap, ref = sim.captures[k], sim.images[k, :, 0]
     base = [si_sdr(ref[j], cap.audio[0]) for j in range(n)]
     for name, pos in (("located", located), ("true", true)):
-        gains, kept, before, distinct, share, remixed = ([float("nan")] * n for _ in range(6))
+        gains, out, kept, before, distinct, share, remixed = ([float("nan")] * n for _ in range(7))
         have = np.all(np.isfinite(pos), axis=1)
         if have.any():
-            sep = informed(cap, pos[have], guard=False)  # every track; the guard's verdict beside it
-            guarded = passes_guard(sep.distinct, sep.share, sep.remixed)
-            unmixed = passes_guard(sep.distinct, sep.share, np.full(len(sep.share), np.inf))  # the guard before the remix's bound
+            sep = informed(cap, pos[have], guard=False)  # every track; the guard's verdict and weight beside it
+            unmixed = track_weights(sep.distinct, sep.share, np.full(len(sep.share), np.inf)) > 0  # the guard before the remix's bound
             for i, j in enumerate(np.flatnonzero(have)):
                 gains[j] = si_sdr(ref[j], sep.signals[i]) - base[j]
-                kept[j], before[j], distinct[j], share[j] = bool(guarded[i]), bool(unmixed[i]), float(sep.distinct[i]), float(sep.share[i])
+                w = float(sep.weight[i])  # what the guard gives: the track mixed with microphone 0
+                out[j] = si_sdr(ref[j], cap.audio[0] + w * (sep.signals[i] - cap.audio[0])) - base[j] if w > 0 else 0.0
+                kept[j], before[j], distinct[j], share[j] = w > 0, bool(unmixed[i]), float(sep.distinct[i]), float(sep.share[i])
                 remixed[j] = float(sep.remixed[i])
         row[f"gain_{name}_db"], row[f"kept_{name}"], row[f"distinct_{name}"], row[f"share_{name}"] = gains, kept, distinct, share
-        row[f"kept_before_{name}"], row[f"remixed_{name}"] = before, remixed
+        row[f"guarded_{name}_db"], row[f"kept_before_{name}"], row[f"remixed_{name}"] = out, before, remixed
     row["time_s"] = time.perf_counter() - t0
     return row
 
@@ -252,6 +254,9 @@ def report_envelope(rows: list[dict]) -> str:
             g = np.array([x for r in sel for x in r[f"gain_{name}_db"]], float)
             kept = np.array([k is True for r in sel for k in r[f"{guard}_{name}"]])
             g = np.where(np.isfinite(g), g, 0.0)
+            if guard == "kept":  # the guard's output: each kept track mixed with microphone 0 (track_weights)
+                out = np.array([x for r in sel for x in r[f"guarded_{name}_db"]], float)
+                return g, np.where(kept & np.isfinite(out), out, 0.0), kept
             return g, np.where(kept, g, 0.0), kept
         raw, guarded, kept = gains("located")
         _, before, _ = gains("located", "kept_before")

@@ -168,3 +168,20 @@ def test_a_track_the_separation_cannot_take_back_out_of_its_own_remix_is_the_mic
     guarded = informed(cap, wrong)
     assert guarded.remixed[0] < GUARD["remixed_db"] and not guarded.separated[0]
     assert np.array_equal(guarded.signals[0], cap.audio[0])
+    # A kept track comes mixed with microphone 0 as the remix allows, and is better for it here.
+    raw = informed(cap, np.array([s.position for s in sources]), guard=False)
+    assert np.all((right.weight > 0.5) & (right.weight < 1)) and np.array_equal(raw.weight, right.weight)
+    assert np.allclose(right.signals, cap.audio[0] + right.weight[:, None] * (raw.signals - cap.audio[0]))
+    assert np.mean(gains(right)) > np.mean(gains(raw))
+
+
+def test_a_kept_track_weighs_against_the_microphone_as_its_remix_says():
+    """track_weights: 0 where the guard gives the microphone, 1 for a lone source, and between
+    them rising with the remix's reading."""
+    from localization.separate import GUARD, track_weights
+
+    ok = np.ones(4)
+    w = track_weights(ok, ok, np.array([GUARD["remixed_db"] - 0.1, GUARD["remixed_db"], 20.0, np.inf]))
+    assert w[0] == 0.0 and w[3] == 1.0 and 0.6 < w[1] < w[2] < 1.0
+    assert np.isclose(w[1], 1 / (1 + 10 ** (-(GUARD["remixed_db"] - GUARD["mix_back_db"]) / GUARD["mix_back_width_db"])))
+    assert track_weights(np.array([0.0]), np.ones(1), np.array([30.0]))[0] == 0.0  # not distinct: the microphone
