@@ -613,8 +613,7 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
             agreement = float(p[best]) / _turned_peak(votes, grid)
         x = _refine(votes, grid[best], lo, hi, step_m, found)
         found.append(x)
-        strength.append(float(votes.power(x[None])[0]))
-        votes.explain(x)
+        strength.append(_claim(votes, x))
     if len(found) >= 2:
         found, strength = _cycle(votes, grid, lo, hi, step_m, found)
     votes.maps = every_vote
@@ -655,11 +654,14 @@ def _cycle(votes: "Votes", grid: np.ndarray, lo, hi, step_m: float, found: list)
                 if moved > explained:
                     found[i], explained = x, moved
     votes.reset()
-    strength = []
-    for x in found:
-        strength.append(float(votes.power(x[None])[0]))
-        votes.explain(x)
-    return found, strength
+    return found, [_claim(votes, x) for x in found]
+
+
+def _claim(votes: "Votes", x: np.ndarray) -> float:
+    """A source found at ``x``: its strength on the votes left, which it then explains."""
+    strength = float(votes.power(x[None])[0])
+    votes.explain(x)
+    return strength
 
 
 def _turned_peak(votes: "Votes", grid: np.ndarray) -> float:

@@ -449,6 +449,47 @@ def test_only_a_surface_beyond_an_alarms_doubt_alerts():
     assert tr.confirmed and levels == ["clear", "clear", "stop", "stop"]
 
 
+
+def _line_track(d0: float, speed: float, n: int, score: float):
+    """A track of ``n`` echoes, one a pulse, from ``d0`` m at ``speed`` m/s, of that score."""
+    from vrecho.headset.tracks import Track
+
+    tr = Track()
+    for k in range(n):
+        tr.update(0.04 * k, d0 + speed * 0.04 * k, 0.02)
+    tr.score = score
+    return tr
+
+
+def test_a_receding_surface_starts_no_alert():
+    # Seed 19000's room 17 (all at once, a walk past a wall): a track of stray peaks 0.23 to 0.27 m
+    # off, receding at 0.17 m/s, in the way by the fit and just over the alert's score, stopped the
+    # wearer. A surface that recedes has passed its closest approach: it starts no alert; one that
+    # stands or nears at that distance stops, and a stop already called holds while it recedes.
+    levels = []
+    for speed, level in ((0.17, "clear"), (0.0, "clear"), (-0.5, "clear"), (0.17, "stop")):
+        mon = _monitor()
+        tr = _line_track(0.27 - speed * 0.44, speed, 12, 8.3)
+        tr.ahead, tr.approached_at = True, tr.times[-1]
+        mon._tracks, mon._now, mon._level = [tr], int((tr.times[-1] + 0.05) * FS), level
+        mon._judge(None, tr.times[-1] + 0.04)
+        levels.append(mon._level)
+    assert levels == ["clear", "stop", "stop", "stop"]
+
+
+def test_a_phantom_speed_behind_does_not_hold_back_a_wall_ahead():
+    # Seed 5000's room 7 (block 64): a wall nearing at 1.75 m/s, 0.64 m off, steadily, not yet
+    # fitted, while a track that took another surface's echoes after missed pulses read 2.3 m/s
+    # receding (the wearer walked at 1.76). Taken for the wearer's pace, it put the wall 0.41 m off
+    # the way and the caution came at 0.46 m. No wearer walks faster than 2 m/s: caution now.
+    mon = _monitor()
+    wall = _line_track(0.64 + 1.75 * 0.44, -1.75, 12, 25.0)
+    wall.approached_at = wall.times[-1]
+    behind = _line_track(2.1 - 2.3 * 0.44, 2.3, 12, 20.0)
+    mon._tracks, mon._now = [wall, behind], int((wall.times[-1] + 0.02) * FS)
+    mon._judge(None, wall.times[-1] + 0.04)
+    assert wall.ahead is None and max(wall.straight(8)) < 0.005 and mon._level == "caution"
+
 def _among_pings(own: float, ping: float, n_pings: int, seconds: float, seed: int) -> np.ndarray:
     """A stream of the monitor's own pulses (peak ``own``, 5000 samples round trip; 0: muted) among
     ``n_pings`` other headsets' pings (either code, peak up to ``ping``) at random times."""

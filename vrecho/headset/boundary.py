@@ -215,14 +215,12 @@ class BoundaryMonitor:
         self._fresh: list[tuple] = []  # the last pulses' echoes no track took (tracks.initiate)
         self._alert = self._verdict = Alert(flags=("unlocked",))  # the alert returned; the last judgement behind it
         self._verdict_track: Track | None = None  # the surface it rests on
-        self._oldest_approach = np.inf  # the earliest approached_at among the surfaces judged
-        self._judge_at = np.inf  # when the wearer, walking on, reaches the next threshold (seconds): judge again then
+        self._oldest_approach = self._judge_at = np.inf  # earliest approached_at judged; next threshold's time (s)
         self._stage = np.zeros(_STAGE, np.float32)
         self._block = np.zeros(0, np.float32)  # the block being read, as float32 (reused)
         self._ends_for, self._ends = -1, []  # the pulse whose echoes' lags _echo_ends gave, and those lags
         self._still: list[float] = []  # distances of the surfaces that stay put, at the last commit
-        self._level = "clear"
-        self._pace, self._behind, self._paced_at = 0.0, 0.0, 0.0  # the wearer's pace, the walls behind's (_judge)
+        self._level, self._pace, self._behind, self._paced_at = "clear", 0.0, 0.0, 0.0  # the wearer's pace, the walls behind's
         self._echoes = EchoFinder(probes, fs, self.window, threshold=threshold, min_range_m=min_range_m,
                                   max_range_m=max_range_m, mic_offset_m=mic_offset_m)
         self._faint = FaintEchoes(fs, self.window, self._mic, threshold)  # (echoes too weak for one pulse: faint.py)
@@ -645,11 +643,12 @@ class BoundaryMonitor:
                  and t_pulse - tr.times[-1] < 0.4]  # (pulse times: the round trip ago)
         forgot, self._paced_at = t_now - self._paced_at, t_now  # (forgotten at 1 m/s a second)
         self._pace = pace = max(max(map(abs, heard), default=0.0), self._pace - forgot)
-        self._behind = behind = max(max(heard, default=0.0), self._behind - forgot)
+        self._behind = max(max(heard, default=0.0), self._behind - forgot)
+        behind = min(self._behind, _PACE_MAX_MPS)  # (faster: a track that took another surface's echoes)
         for tr in self._tracks:
             if tr.ahead is False or (not tr.ahead and id(tr) not in provisional and (tr.speed or 0.0) > -0.5) \
-                    or tr.score < _ALERTING:  # (or a surface not beyond an alarm's doubt: _ALERTING)
-                continue  # (neither in the way, nor asked again, nor nearing fast: most surfaces, cheaply)
+                    or tr.score < _ALERTING or (self._level == "clear" and (tr.speed or 0.0) > _RECEDING_MPS):
+                continue  # (not in the way, nor asked again, nor nearing fast; beyond doubt, _ALERTING; not receding)
             v = tr.speed
             d = provisional.get(id(tr), tr.dists[-1])
             at = t_pulse if id(tr) in provisional else tr.times[-1]
@@ -662,12 +661,12 @@ class BoundaryMonitor:
                 self._oldest_approach = min(self._oldest_approach, tr.approached_at)
                 level = self._level_for(d_now, ttc, aside)
             elif (len(tr.times) >= 5 and closing >= 0.5 and at - tr.times[-5] < 0.45 and tr.score >= _LOOMING
-                  and d < self.caution_m and d / closing < 0.75 and tr.straight(8) < 0.005
+                  and d < self.caution_m and d / closing < 0.75 and (bend := tr.straight(8))[0] < 0.005 and bend[1] < 0.03
                   and (behind <= closing or d * d * (1.0 - (closing / behind) ** 2) < self.miss_m ** 2)):
-                # Not yet known to be in the way (the fit needs a third of a second), but near, nearing fast
-                # and steadily beyond doubt (the score; the last eight echoes on a line within 5 mm, where a still
-                # wall's track that took another headset's pings bends; five in 0.45 s: dropouts cost pulses), and
-                # not passing by: nearing at c as walls behind recede at v, it lies d sqrt(1 - (c/v)^2) off the way.
+                # Not yet in the way by the fit (it needs a third of a second), but near, nearing fast and steadily
+                # beyond doubt (the score; the last eight echoes on a line within 5 mm, where a still wall's track that
+                # took other headsets' pings bends, the newest within 3 cm: no stray peak just taken; five in 0.45 s),
+                # and not passing by: nearing at c as walls behind recede at v, it lies d sqrt(1 - (c/v)^2) off the way.
                 level = "caution"
             else:
                 continue  # not known to be in the way (asked again with the echo still arriving, if any)
@@ -695,6 +694,7 @@ class BoundaryMonitor:
 _RANK = {"clear": 0, "caution": 1, "stop": 2}
 _TRUE = np.ones(8192, bool)  # every sample sound: the usual block's mask, never written to
 _ASIDE_TTC = 0.75  # (of caution_ttc_s, for a surface aside: a wall met at under 30 degrees, grazed)
+_PACE_MAX_MPS, _RECEDING_MPS = 2.0, 0.1  # the fastest a wearer walks (the envelope's); receding faster starts no alert
 _LOOMING = 12.0  # the track score from which a surface nearing fast and close cautions before the fit
 _ALERTING = 8.0  # and any alert: lines of stray peaks among other headsets' pings stay confirmed at 5 to 7
 _STAGE = 441  # smaller blocks are gathered to that many (10 ms at 44.1 kHz: 16 samples cost what 480 do)

@@ -249,12 +249,14 @@ class Track:
         return passing(np.fromiter(times, float, len(times)), np.fromiter(dists, float, len(dists)),
                         np.asarray(offsets, float), float(span_s))
 
-    def straight(self, n: int) -> float:
+    def straight(self, n: int) -> tuple[float, float]:
         """How far the last ``n`` echoes stray from a straight line in time: the median absolute
         residual about the line of their median pairwise slope (Theil-Sen), in metres. A
         surface's echoes, walked toward at a steady pace: a millimetre or so, whatever one pulse
         timed off after the round trip stepped; a still surface's track that took a line of
-        stray peaks: centimetres, where it bends.
+        stray peaks: centimetres, where it bends. And the newest echo's own residual, which the
+        median overlooks: a track that has just taken a stray peak 10 to 30 cm nearer than its
+        surface (another headset's ping) lies on its line but for that echo.
 
         Parameters
         ----------
@@ -263,14 +265,15 @@ class Track:
 
         Returns
         -------
-        float
+        median, newest : float
         """
         k = min(n, len(self.times))
         t = np.fromiter(self.times, float, len(self.times))[-k:]
         d = np.fromiter(self.dists, float, len(self.dists))[-k:]
         i, j = np.triu_indices(k, 1)
         r = d - np.median((d[j] - d[i]) / np.maximum(t[j] - t[i], 1e-6)) * t
-        return float(np.median(np.abs(r - np.median(r))))
+        r = np.abs(r - np.median(r))
+        return float(np.median(r)), float(r[-1])
 
     def ahead_with(self, t: float, d: float, miss_m: float, still: list[float]) -> bool:
         """Whether the surface is in the way with one more echo, the history left as it is.
