@@ -449,7 +449,6 @@ def test_only_a_surface_beyond_an_alarms_doubt_alerts():
     assert tr.confirmed and levels == ["clear", "clear", "stop", "stop"]
 
 
-
 def _line_track(d0: float, speed: float, n: int, score: float):
     """A track of ``n`` echoes, one a pulse, from ``d0`` m at ``speed`` m/s, of that score."""
     from vrecho.headset.tracks import Track
@@ -489,6 +488,7 @@ def test_a_phantom_speed_behind_does_not_hold_back_a_wall_ahead():
     mon._tracks, mon._now = [wall, behind], int((wall.times[-1] + 0.02) * FS)
     mon._judge(None, wall.times[-1] + 0.04)
     assert wall.ahead is None and max(wall.straight(8)) < 0.005 and mon._level == "caution"
+
 
 def _among_pings(own: float, ping: float, n_pings: int, seconds: float, seed: int) -> np.ndarray:
     """A stream of the monitor's own pulses (peak ``own``, 5000 samples round trip; 0: muted) among
