@@ -188,7 +188,7 @@ def envelope_room(args):
     from scipy.optimize import linear_sum_assignment
 
     from localization import locate
-    from localization.separate import informed, si_sdr, track_weights
+    from localization.separate import informed, mix_back, si_sdr, track_weights
     from vrecho.errors import VrechoError
     from vrecho.sim.arrays import envelope_walk
 
@@ -233,7 +233,7 @@ def envelope_room(args):
             for i, j in enumerate(np.flatnonzero(have)):
                 gains[j] = si_sdr(ref[j], sep.signals[i]) - base[j]
                 w = float(sep.weight[i])  # what the guard gives: the track mixed with microphone 0
-                out[j] = si_sdr(ref[j], cap.audio[0] + w * (sep.signals[i] - cap.audio[0])) - base[j] if w > 0 else 0.0
+                out[j] = si_sdr(ref[j], mix_back(cap.audio[0], sep.signals[i], w)) - base[j] if w > 0 else 0.0
                 kept[j], before[j], distinct[j], share[j] = w > 0, bool(unmixed[i]), float(sep.distinct[i]), float(sep.share[i])
                 remixed[j] = float(sep.remixed[i])
         row[f"gain_{name}_db"], row[f"kept_{name}"], row[f"distinct_{name}"], row[f"share_{name}"] = gains, kept, distinct, share

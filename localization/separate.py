@@ -369,7 +369,7 @@ def informed(capture: Capture, positions: np.ndarray, *, guard: bool = True) -> 
         y = y + rho[:, None] * high[None]
     weight = track_weights(distinct, mass, remixed)
     if guard:
-        y = capture.audio[0] + weight[:, None] * (y - capture.audio[0])
+        y = mix_back(capture.audio[0], y, weight)
     return Informed(y, weight > 0 if guard else np.ones(k_src, bool), weight, distinct, mass, remixed)
 
 
@@ -457,6 +457,27 @@ def track_weights(distinct: np.ndarray, share: np.ndarray, remixed: np.ndarray) 
         weight = 1.0 / (1.0 + 10.0 ** (-(remixed - GUARD["mix_back_db"]) / GUARD["mix_back_width_db"]))
     keep = (np.asarray(distinct) >= GUARD["distinct"]) & (np.asarray(share) >= GUARD["share"]) & (remixed >= GUARD["remixed_db"])
     return np.where(keep, weight, 0.0)
+
+
+def mix_back(mic0: np.ndarray, tracks: np.ndarray, weight) -> np.ndarray:
+    """Tracks mixed with microphone 0 as :func:`track_weights` weighs them: ``mic0 + w (track - mic0)``.
+
+    Parameters
+    ----------
+    mic0 : numpy.ndarray [shape=(n,)]
+        The reference microphone's samples.
+    tracks : numpy.ndarray [shape=(n,) or (K, n)]
+        One track, or one per source.
+    weight : float or numpy.ndarray [shape=(K,)]
+        Each track's weight (0: microphone 0 alone).
+
+    Returns
+    -------
+    numpy.ndarray
+        The shape of ``tracks``.
+    """
+    w = np.asarray(weight, float)
+    return mic0 + (w[..., None] if w.ndim else w) * (tracks - mic0)
 
 
 def _at_rate(x: np.ndarray, rate: int, fs: int, n: int) -> np.ndarray:

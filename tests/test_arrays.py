@@ -178,10 +178,13 @@ def test_a_track_the_separation_cannot_take_back_out_of_its_own_remix_is_the_mic
 def test_a_kept_track_weighs_against_the_microphone_as_its_remix_says():
     """track_weights: 0 where the guard gives the microphone, 1 for a lone source, and between
     them rising with the remix's reading."""
-    from localization.separate import GUARD, track_weights
+    from localization.separate import GUARD, mix_back, track_weights
 
     ok = np.ones(4)
     w = track_weights(ok, ok, np.array([GUARD["remixed_db"] - 0.1, GUARD["remixed_db"], 20.0, np.inf]))
     assert w[0] == 0.0 and w[3] == 1.0 and 0.6 < w[1] < w[2] < 1.0
     assert np.isclose(w[1], 1 / (1 + 10 ** (-(GUARD["remixed_db"] - GUARD["mix_back_db"]) / GUARD["mix_back_width_db"])))
     assert track_weights(np.array([0.0]), np.ones(1), np.array([30.0]))[0] == 0.0  # not distinct: the microphone
+    mic, tracks = np.arange(3.0), np.array([[5.0, 5, 5], [1, 1, 1], [2, 4, 6]])
+    mixed = mix_back(mic, tracks, np.array([0.0, 1.0, 0.5]))  # what informed gives: each track with the microphone
+    assert np.array_equal(mixed, [mic, tracks[1], [1, 2.5, 4]]) and np.array_equal(mix_back(mic, tracks[2], 0.5), mixed[2])
