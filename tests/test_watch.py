@@ -143,3 +143,22 @@ def test_watch_warns_of_the_window_through_jack(jack_server):
     stop = next(line for line in lines if line.startswith("stop"))
     assert 0.2 < float(re.search(r"at ([\d.]+) m", stop).group(1)) < 0.75, out
     assert room.started is not None
+
+
+def test_watch_lists_the_devices_and_says_when_there_are_none(jack_server):
+    """``--list-devices`` in a fresh process: the JACK server's devices where one runs; elsewhere
+    the machine's, or one line saying there are none, and then ``watch`` exits with one line."""
+    server, env = jack_server
+    listed = subprocess.run([sys.executable, "-m", "vrecho", "watch", "--list-devices"], env=env,
+                            capture_output=True, text=True, timeout=60)
+    assert listed.returncode == 0 and "JACK" in listed.stdout, listed.stdout + listed.stderr
+    alone = {**env, "JACK_DEFAULT_SERVER": f"{server}-absent", "JACK_NO_START_SERVER": "1"}
+    listed = subprocess.run([sys.executable, "-m", "vrecho", "watch", "--list-devices"], env=alone,
+                            capture_output=True, text=True, timeout=60)
+    assert listed.returncode == 0 and listed.stdout.strip(), listed.stderr
+    if listed.stdout.startswith("no sound devices"):  # (a machine with a sound card lists it instead)
+        assert listed.stdout.count("\n") == 1
+        run = subprocess.run([sys.executable, "-m", "vrecho", "watch", "--seconds", "1"], env=alone,
+                             capture_output=True, text=True, timeout=60)
+        assert run.returncode == 2 and run.stdout == "", run.stdout
+        assert run.stderr.count("\n") == 1 and "no usable audio device" in run.stderr, run.stderr

@@ -34,14 +34,16 @@ def list_devices() -> str:
     Returns
     -------
     str
-        One line per device (``>`` the default input, ``<`` the default output).
+        One line per device (``>`` the default input, ``<`` the default output), or one line
+        saying that PortAudio sees none (no sound card, no audio server running).
 
     Raises
     ------
     VrechoError
         Where PortAudio is missing.
     """
-    return str(_sounddevice().query_devices())
+    devices = _sounddevice().query_devices()
+    return str(devices) if len(devices) else "no sound devices: PortAudio sees no sound card and no audio server"
 
 
 def watch(*, device=None, samplerate: int = 48000, blocksize: int = 0, mic_offset_m: float = 0.07,
