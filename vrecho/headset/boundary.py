@@ -14,7 +14,7 @@ seed (a faint tick), and:
    clocks' drift and the steps, and while it is not locked says "unlocked" and raises no alarm
    ("no_direct_sound" after a second: a muted loudspeaker). Another headset's pings, dithered by
    its own seed, land somewhere else every pulse, and half the time in the other code, 20 dB
-   down: a line of them is rare, and short of an alarm's score (``_ALERTING``).
+   down: a line of them is rare, and short of an alarm's score (:attr:`~.tracks.Track.alerting`).
 1. **Ranging.** The microphone's stream is correlated with each pulse's code as it arrives (the
    envelope, :class:`~.ranging.Envelope`); each pulse's own direct sound is its time reference;
    echo peaks above the noise floor and the direct sound's sidelobes are timed to a fraction of a
@@ -647,8 +647,8 @@ class BoundaryMonitor:
         behind = min(self._behind, _PACE_MAX_MPS)  # (faster: a track that took another surface's echoes)
         for tr in self._tracks:
             if tr.ahead is False or (not tr.ahead and id(tr) not in provisional and (tr.speed or 0.0) > -0.5) \
-                    or tr.score < _ALERTING or (self._level == "clear" and (tr.speed or 0.0) > _RECEDING_MPS):
-                continue  # (not in the way, nor asked again, nor nearing fast; beyond doubt, _ALERTING; not receding)
+                    or not tr.alerting or (self._level == "clear" and (tr.speed or 0.0) > _RECEDING_MPS):
+                continue  # (not in the way, nor asked again, nor nearing fast; beyond doubt, Track.alerting; not receding)
             v = tr.speed
             d = provisional.get(id(tr), tr.dists[-1])
             at = t_pulse if id(tr) in provisional else tr.times[-1]
@@ -696,5 +696,4 @@ _TRUE = np.ones(8192, bool)  # every sample sound: the usual block's mask, never
 _ASIDE_TTC = 0.75  # (of caution_ttc_s, for a surface aside: a wall met at under 30 degrees, grazed)
 _PACE_MAX_MPS, _RECEDING_MPS = 2.0, 0.1  # the fastest a wearer walks (the envelope's); receding faster starts no alert
 _LOOMING = 12.0  # the track score from which a surface nearing fast and close cautions before the fit
-_ALERTING = 8.0  # and any alert: lines of stray peaks among other headsets' pings stay confirmed at 5 to 7
 _STAGE = 441  # smaller blocks are gathered to that many (10 ms at 44.1 kHz: 16 samples cost what 480 do)
