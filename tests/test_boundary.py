@@ -454,32 +454,38 @@ def test_a_weak_track_whose_echoes_scatter_off_a_line_raises_no_alert():
     # pings, 0.52 to 0.23 m off, nearing unevenly (0.7 to 4.5 cm a pulse), scored 9 and stopped
     # the wearer 0.86 s into the walk. A surface's echoes, walked toward, lie on a line within a
     # millimetre or so: under a score of 15 a track alerts only on one within 3 mm.
-    from vrecho.headset.tracks import Track
-
     times = [0.321, 0.361, 0.402, 0.441, 0.481, 0.602, 0.642, 0.682, 0.722, 0.801]
     uneven = [0.519, 0.5, 0.472, 0.427, 0.42, 0.353, 0.318, 0.31, 0.273, 0.226]
     steady = list(np.interp(times, [times[0], times[-1]], [uneven[0], uneven[-1]]))
-    levels = []
-    for dists, score in ((uneven, 9.0), (steady, 9.0), (uneven, 20.0)):
-        mon, tr = _monitor(), Track()
-        for t, d in zip(times, dists):
-            tr.update(t, d, 0.02)
-        tr.score, tr.ahead, tr.approached_at = score, True, times[-1]
-        mon._tracks, mon._now = [tr], int((times[-1] + 0.05) * FS)
-        mon._judge(None, times[-1] + 0.04)
-        levels.append(mon._level)
+    levels = [_level_alone(_track(times, dists, score)) for dists, score in ((uneven, 9.0), (steady, 9.0), (uneven, 20.0))]
     assert levels == ["clear", "stop", "stop"]
+
+
+def _track(times, dists, score: float):
+    """A track of those echoes (seconds, metres), of that score."""
+    from vrecho.headset.tracks import Track
+
+    tr = Track()
+    for t, d in zip(times, dists):
+        tr.update(t, d, 0.02)
+    tr.score = score
+    return tr
 
 
 def _line_track(d0: float, speed: float, n: int, score: float):
     """A track of ``n`` echoes, one a pulse, from ``d0`` m at ``speed`` m/s, of that score."""
-    from vrecho.headset.tracks import Track
+    times = 0.04 * np.arange(n)
+    return _track(times, d0 + speed * times, score)
 
-    tr = Track()
-    for k in range(n):
-        tr.update(0.04 * k, d0 + speed * 0.04 * k, 0.02)
-    tr.score = score
-    return tr
+
+def _level_alone(tr, level: str = "clear") -> str:
+    """The level a fresh monitor at ``level`` calls for ``tr`` alone, in the way by the fit and
+    approached at its last echo, judged 50 ms after it (the next pulse emitted 40 ms after)."""
+    mon = _monitor()
+    tr.ahead, tr.approached_at = True, tr.times[-1]
+    mon._tracks, mon._now, mon._level = [tr], int((tr.times[-1] + 0.05) * FS), level
+    mon._judge(None, tr.times[-1] + 0.04)
+    return mon._level
 
 
 def test_a_receding_surface_starts_no_alert():
@@ -487,14 +493,8 @@ def test_a_receding_surface_starts_no_alert():
     # off, receding at 0.17 m/s, in the way by the fit and just over the alert's score, stopped the
     # wearer. A surface that recedes has passed its closest approach: it starts no alert; one that
     # stands or nears at that distance stops, and a stop already called holds while it recedes.
-    levels = []
-    for speed, level in ((0.17, "clear"), (0.0, "clear"), (-0.5, "clear"), (0.17, "stop")):
-        mon = _monitor()
-        tr = _line_track(0.27 - speed * 0.44, speed, 12, 8.3)
-        tr.ahead, tr.approached_at = True, tr.times[-1]
-        mon._tracks, mon._now, mon._level = [tr], int((tr.times[-1] + 0.05) * FS), level
-        mon._judge(None, tr.times[-1] + 0.04)
-        levels.append(mon._level)
+    levels = [_level_alone(_line_track(0.27 - speed * 0.44, speed, 12, 8.3), level)
+              for speed, level in ((0.17, "clear"), (0.0, "clear"), (-0.5, "clear"), (0.17, "stop"))]
     assert levels == ["clear", "stop", "stop", "stop"]
 
 

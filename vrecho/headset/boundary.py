@@ -647,8 +647,8 @@ class BoundaryMonitor:
         behind = min(self._behind, _PACE_MAX_MPS)  # (faster: a track that took another surface's echoes)
         for tr in self._tracks:
             if tr.ahead is False or (not tr.ahead and id(tr) not in provisional and (tr.speed or 0.0) > -0.5) \
-                    or not tr.alerting or (self._level == "clear" and (tr.speed or 0.0) > _RECEDING_MPS):
-                continue  # (not in the way, nor asked again, nor nearing fast; beyond doubt, Track.alerting; not receding)
+                    or (self._level == "clear" and (tr.speed or 0.0) > _RECEDING_MPS) or not tr.alerting:
+                continue  # (not in the way, nor asked again, nor nearing fast; not receding; beyond doubt, Track.alerting)
             v = tr.speed
             d = provisional.get(id(tr), tr.dists[-1])
             at = t_pulse if id(tr) in provisional else tr.times[-1]
