@@ -461,6 +461,25 @@ def test_a_weak_track_whose_echoes_scatter_off_a_line_raises_no_alert():
     assert levels == ["clear", "stop", "stop"]
 
 
+def test_the_line_a_track_is_judged_by_is_theil_sens():
+    # Track.straight (compiled): the median absolute residual about the line of the median pairwise
+    # slope, as NumPy reckons it, and the newest echo's own; an outlier moves the line not at all.
+    rng = np.random.default_rng(3)
+    for n in (3, 6, 8, 11):
+        times = np.sort(rng.uniform(0.0, 0.5, n))
+        dists = 2.0 - 1.2 * times + rng.normal(0.0, 0.002, n)
+        tr = _track(times, dists, 0.0)
+        t, d = times[-8:], dists[-8:]
+        i, j = np.triu_indices(len(t), 1)
+        r = d - np.median((d[j] - d[i]) / (t[j] - t[i])) * t
+        r = np.abs(r - np.median(r))
+        assert tr.straight(8) == pytest.approx((np.median(r), r[-1]), abs=1e-12)
+    line = 2.0 - 1.2 * 0.04 * np.arange(8)
+    assert _line_track(2.0, -1.2, 8, 0.0).straight(8) == pytest.approx((0.0, 0.0), abs=1e-9)
+    bent = _track(0.04 * np.arange(8), np.r_[line[:-1], line[-1] - 0.2], 0.0).straight(8)
+    assert bent[0] < 1e-9 and bent[1] == pytest.approx(0.2)
+
+
 def _track(times, dists, score: float):
     """A track of those echoes (seconds, metres), of that score."""
     from vrecho.headset.tracks import Track

@@ -492,7 +492,8 @@ class BoundaryMonitor:
             k = self._next
             due = lock.due(k)
             end = int(due) + self.window
-            if env.ready() < end:
+            ready = env.ready()
+            if ready < end:
                 break
             env.skip(int(due) - lock.guard - 4)  # locked: only the pulses' windows are looked at
             env.compute(end, code=sch.code(k))
@@ -514,10 +515,7 @@ class BoundaryMonitor:
                     changed = True
                     self._ends_for = -1
             self._next = k + 1
-        k = self._next
-        partial = None
-        due = lock.due(k)
-        ready = env.ready()
+        partial = None  # (k, due and ready: the pulse the loop stopped at)
         if ready > due + self._env.m:
             # A surface near a threshold: its echo of this pulse may cross it; looked for in the
             # block that echo ends in (as predicted, +/- 1.5 ms), not in every block.

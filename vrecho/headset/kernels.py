@@ -2,7 +2,7 @@
 (:func:`take`), a pulse's echoes in its envelope (:func:`echo_peaks`, their distances
 :func:`echo_distance`, the inverse of :func:`echo_path`), their pairing with the tracks (:func:`pair`, strengths weighed by
 :func:`amplitude_llr`), the lines that start tracks (:func:`lines`), and the tracks' fits
-(:func:`closest_approach`, :func:`passing`). Plain loops over a few hundred lags or a few
+(:func:`closest_approach`, :func:`passing`, :func:`theil_sen`). Plain loops over a few hundred lags or a few
 dozen echoes, where a score of array calls cost more than the work; :mod:`.boundary`, :mod:`.echoes`
 and :mod:`.tracks` call them and say what each means. :func:`compile_kernels` makes them (or
 loads them from numba's cache) before any audio callback needs them.
@@ -32,6 +32,7 @@ def compile_kernels() -> None:
     pair(np.ones(2), np.ones(2), np.ones(1), np.ones(1), 1.0, 0.01)
     echo_path(1.0, 0.07, 0.0)  # (scalars, as the monitor calls it too)
     lines(np.ones(1), np.ones(1), np.ones(1), 0.5, -0.1, 0.1, 0.006)
+    theil_sen(np.arange(3.0), np.ones(3))
     _COMPILED = True
 
 
@@ -257,6 +258,33 @@ def _fit(us, ys, keep):  # pragma: no cover (compiled)
         if keep[i]:
             rss += resid[i] * resid[i]
     return ok, p2, p1, p0, inv, rss, resid
+
+
+@njit(cache=True, nogil=True)
+def theil_sen(t, d):  # pragma: no cover (compiled)
+    """How far the points (t, d) stray from the line of their median pairwise slope (Theil-Sen).
+
+    Parameters
+    ----------
+    t, d : numpy.ndarray [shape=(n,)]
+        Times in seconds and distances in metres, n >= 2.
+
+    Returns
+    -------
+    median, newest : float
+        The median absolute residual about that line (its offset the residuals' median), in
+        metres, and the last point's own.
+    """
+    n = len(t)
+    slopes = np.empty(n * (n - 1) // 2)
+    k = 0
+    for i in range(n):
+        for j in range(i + 1, n):
+            slopes[k] = (d[j] - d[i]) / max(t[j] - t[i], 1e-6)
+            k += 1
+    r = d - np.median(slopes) * t
+    r = np.abs(r - np.median(r))
+    return np.median(r), r[-1]
 
 
 @njit(cache=True, nogil=True)

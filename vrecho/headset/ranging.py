@@ -259,10 +259,11 @@ class ProbeSchedule:
             The first pulse that may sound after this block: ``k`` for the next call.
         """
         out.fill(0.0)
-        m, end = self.length, start + len(out)
+        end = start + len(out)
         silent_from, silent_to, after = self._silent
         if silent_from <= start and end <= silent_to:  # (most small blocks: between two pulses)
             return after
+        m = self.length
         if self.emission(k) + m <= start:
             k = self.first_at_or_after(max(start - m + 1, 0))
         while (e := self.emission(k)) < end:
@@ -329,11 +330,15 @@ class Envelope:
         ok : numpy.ndarray [shape=(k,), dtype=bool]
             Which are sound.
         """
+        n = len(x)
         at = self.n % self.size
-        first = min(len(x), self.size - at)
-        self.x[at:at + first], self.ok[at:at + first] = x[:first], ok[:first]
-        self.x[:len(x) - first], self.ok[:len(x) - first] = x[first:], ok[first:]
-        self.n += len(x)
+        if at + n <= self.size:  # (the usual block: no wrap)
+            self.x[at:at + n], self.ok[at:at + n] = x, ok
+        else:
+            first = self.size - at
+            self.x[at:], self.ok[at:] = x[:first], ok[:first]
+            self.x[:n - first], self.ok[:n - first] = x[first:], ok[first:]
+        self.n += n
 
     def ready(self) -> int:
         """The end of the lags whose envelope the samples received allow (exclusive).

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .kernels import amplitude_llr, closest_approach, lines, pair, passing
+from .kernels import amplitude_llr, closest_approach, lines, pair, passing, theil_sen
 
 
 _SIGMA_M = 0.01
@@ -286,10 +286,8 @@ class Track:
         k = min(n, len(self.times))
         t = np.fromiter(self.times, float, len(self.times))[-k:]
         d = np.fromiter(self.dists, float, len(self.dists))[-k:]
-        i, j = np.triu_indices(k, 1)
-        r = d - np.median((d[j] - d[i]) / np.maximum(t[j] - t[i], 1e-6)) * t
-        r = np.abs(r - np.median(r))
-        return float(np.median(r)), float(r[-1])
+        median, newest = theil_sen(t, d)
+        return float(median), float(newest)
 
     def ahead_with(self, t: float, d: float, miss_m: float, still: list[float]) -> bool:
         """Whether the surface is in the way with one more echo, the history left as it is.
