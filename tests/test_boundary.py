@@ -461,6 +461,23 @@ def test_a_weak_track_whose_echoes_scatter_off_a_line_raises_no_alert():
     assert levels == ["clear", "stop", "stop"]
 
 
+def test_sparse_or_scattered_tracks_of_other_headsets_pings_raise_no_alert():
+    # Seed 21000's room 16 (other headsets, a door walk at 0.7 m/s): a track of pings taken one
+    # pulse in three, on a line within 2.1 mm over a second, scored 12.6 and cautioned 1.70 s in;
+    # later one of pings loud enough to score 16 on their strength, 0.17 to 0.39 m off in uneven
+    # steps (18 mm off a line), stopped the wearer. A surface within reach of an alert is heard
+    # in most pulses, its echoes on a line within a few millimetres.
+    sparse_t = [0.522, 0.563, 0.601, 0.64, 0.681, 0.722, 0.923, 1.24, 1.405, 1.484, 1.604, 1.643]
+    sparse_d = [1.036, 1.054, 1.017, 1.042, 1.004, 0.929, 0.784, 0.533, 0.388, 0.326, 0.224, 0.196]
+    loud_t = [2.121, 2.202, 2.361, 2.403, 2.484, 2.602, 2.761, 2.803, 2.882, 2.923, 3.004, 3.082]
+    loud_d = [0.243, 0.167, 0.205, 0.219, 0.269, 0.341, 0.393, 0.344, 0.318, 0.296, 0.269, 0.257]
+    assert _level_alone(_track(sparse_t, sparse_d, 12.6)) == "clear"
+    assert _level_alone(_track(loud_t, loud_d, 16.0)) == "clear"
+    # a surface's line as near, heard every pulse, at either score: a stop
+    assert _level_alone(_line_track(0.196 + 0.8 * 0.44, -0.8, 12, 12.6)) == "stop"
+    assert _level_alone(_line_track(0.257 + 0.2 * 0.44, -0.2, 12, 16.0)) == "stop"
+
+
 def test_the_line_a_track_is_judged_by_is_theil_sens():
     # Track.straight (compiled): the median absolute residual about the line of the median pairwise
     # slope, as NumPy reckons it, and the newest echo's own; an outlier moves the line not at all.

@@ -34,12 +34,21 @@ ALERTING = 8.0
 """The score from which a track may raise an alert (:attr:`Track.alerting`): lines of stray peaks
 among other headsets' pings stay confirmed at 5 to 7."""
 SURE = 15.0
-"""The score from which a track alerts however its last echoes scatter (:attr:`Track.alerting`)."""
+"""The score from which a track alerts on a looser line (:data:`SURE_M`), its echoes however sparse
+(:attr:`Track.alerting`)."""
 STRAY_M = 0.003
 """The most a track under :data:`SURE` may scatter about a line (:meth:`Track.straight`, the last
 eight echoes' median) and alert: a surface's echoes, walked toward, lie on one within 1.4 mm in
 99 % of the first alerts on the recorded walks (2 mm at most under :data:`SURE`); a line of
 other headsets' pings that scored 9 scattered 6.3 mm."""
+SURE_M = 0.006
+"""The most a track of :data:`SURE`'s score and more may scatter about that line and alert: other
+headsets' pings loud enough to score 16 on their strength alone, taken 0.2 to 0.4 m off in
+uneven steps, scattered 18 mm."""
+SPAN_S = 0.6
+"""The longest a track under :data:`SURE` may take to gather its last eight echoes and alert (eight
+of some fifteen pulses): a surface within reach of an alert is heard in most pulses; a line of
+stray peaks taken one in three pulses is not one."""
 
 
 def clutter_strength(echoes) -> float:
@@ -150,9 +159,16 @@ class Track:
 
     @property
     def alerting(self) -> bool:
-        """Whether the track may raise an alert: a score of :data:`ALERTING`, and under
-        :data:`SURE` its last eight echoes on a line within :data:`STRAY_M` (the median)."""
-        return self.score >= ALERTING and (self.score >= SURE or len(self.times) < 5 or self.straight(8)[0] <= STRAY_M)
+        """Whether the track may raise an alert: a score of :data:`ALERTING`, and from five
+        echoes on, its last eight on a line within :data:`STRAY_M` (the median; :data:`SURE_M`
+        from a score of :data:`SURE`), gathered within :data:`SPAN_S` under :data:`SURE`."""
+        times = self.times
+        if self.score < ALERTING or len(times) < 5:
+            return self.score >= ALERTING
+        k = min(8, len(times))
+        if self.score < SURE and times[-1] - times[-k] > SPAN_S * (k - 1) / 7:
+            return False
+        return self.straight(8)[0] <= (SURE_M if self.score >= SURE else STRAY_M)
 
     def missed(self) -> None:
         """A pulse came without an echo for it: evidence against (a surface's echo is heard three
