@@ -58,7 +58,8 @@ surface's echo was in the stream the monitor heard (:func:`echo_level`, median o
 that cautioned in time and those that did not), what a monitor can hear at all.
 
 ``--out DIR`` keeps every walk's result (``walks.json``); ``figure_echo_level.py DIR`` draws the
-echo levels against the outcome.
+echo levels against the outcome, and ``--compare LABEL=DIR ...`` sets such runs side by side
+(each row's cautions in time and false alarms: the README's seeds table).
 """
 
 from __future__ import annotations
@@ -543,6 +544,25 @@ def failures(rows_out: list[dict]) -> list[str]:
     return out
 
 
+def compare(runs: list[tuple[str, list[dict]]]) -> list[str]:
+    """Runs side by side (each a label and its walks, as ``--out`` keeps them): each row's caution
+    before 0.5 m and false alarms, and every row's together."""
+    lines = ["| condition | " + " | ".join(label for label, _ in runs) + " |", "|---" * (len(runs) + 1) + "|"]
+    names = [r for r in ROWS + HELD_OUT if any(w.get("row") == r for _, walks in runs for w in walks)]
+    for row in names + [None]:
+        cells = []
+        for _, walks in runs:
+            rs = [w for w in walks if "skipped" not in w and (row is None or w["row"] == row)]
+            closed = [w for w in rs if w["kind"] in CLOSED]
+            passing = [w for w in rs if w["kind"] not in CLOSED]
+            fa = sum(bool(w["first_alert"]) for w in passing)
+            share = f" ({fa / max(len(passing), 1):.1%})" if row is None else ""
+            cells.append(f"{sum(map(cautioned, closed)) / max(len(closed), 1):.1%} / {fa} of {len(passing)}{share}"
+                         if rs else "-")
+        lines.append(f"| {row or '**all rows**'} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rooms", type=int, default=30)
@@ -551,7 +571,19 @@ def main() -> None:
     ap.add_argument("--rows", default=",".join(ROWS), help="comma-separated rows (default: all)")
     ap.add_argument("--held-out", action="store_true", help="also the held-out rows (rir-generator's rooms)")
     ap.add_argument("--out", type=Path, default=None, help="write every walk's result as JSON here")
+    ap.add_argument("--compare", nargs="+", metavar="LABEL=DIR", default=None,
+                    help="print earlier runs' walks (their --out folders) side by side, and nothing else")
     args = ap.parse_args()
+    if args.compare:
+        runs = []
+        for spec in args.compare:
+            label, _, folder = spec.rpartition("=")
+            path = Path(folder) / "walks.json"
+            if not path.is_file():
+                ap.error(f"--compare: no walks.json in {folder}")
+            runs.append((label or folder, json.loads(path.read_text())))
+        print("\n".join(compare(runs)))
+        return
     rows = tuple(r for r in args.rows.split(",") if r)
     unknown = set(rows) - set(ROWS)
     if unknown:

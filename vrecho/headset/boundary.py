@@ -637,10 +637,11 @@ class BoundaryMonitor:
         self._oldest_approach = self._judge_at = np.inf
         # The wearer's pace, at least: the fastest any surface heard for a while nears or recedes (the
         # wall behind recedes as the wall ahead nears; `behind`: receding only). A wall met at 10 degrees: aside.
+        # At most 2 m/s: faster, a track of stray peaks (a voice's pitch glide), not the wearer.
         heard = [tr.speed for tr in self._tracks if tr.speed is not None and tr.confirmed and len(tr.times) >= 8
                  and t_pulse - tr.times[-1] < 0.4]  # (pulse times: the round trip ago)
         forgot, self._paced_at = t_now - self._paced_at, t_now  # (forgotten at 1 m/s a second)
-        self._pace = pace = max(max(map(abs, heard), default=0.0), self._pace - forgot)
+        self._pace = pace = min(max(max(map(abs, heard), default=0.0), self._pace - forgot), _PACE_MAX_MPS)
         self._behind = max(max(heard, default=0.0), self._behind - forgot)
         behind = min(self._behind, _PACE_MAX_MPS)  # (faster: a track that took another surface's echoes)
         for tr in self._tracks:
