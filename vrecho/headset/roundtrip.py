@@ -217,17 +217,26 @@ class RoundTrip:
                 self.unlock(now)
             return None
         at = a + float(parabolic_peaks(seg, (p,))[0])
-        self._misses, self._suspect, self._missed, self._scans = 0, False, [], {}
+        self._misses, self._suspect = 0, False
         self.level += 0.1 * (peak - self.level)
         step = at - due
         if abs(step) <= 1.5:  # the clocks' drift: followed (an alpha-beta filter of delay and its rate)
             self.delay += self.rate + 0.3 * step
             self.rate += 0.02 * step
-            self._pending = None
+            self._pending, self._missed, self._scans = None, [], {}
             return e + self.delay
         if self._pending is not None and abs(step - self._pending) <= 1.5:  # a step, seen twice
             self.delay += step
-            self._pending = None
+            self._pending, self._missed, self._scans = None, [], {}
             return at
-        self._pending = step  # once: a step, or a stray peak; this pulse is not trusted
+        # Once: a small step, or another pulse's direct sound (its code the same) that a step of
+        # about a period brought here. Not trusted; where this pulse's own arrival went is looked
+        # for as a missed pulse's is (a step of 2048 samples at 48 kHz put the next pulse's direct
+        # sound here every other pulse, and the lock lost 280 ms finding it).
+        self._pending = step
+        self._missed = self._missed[-2:] + [k]
+        jump, _ = self._step(env)
+        if jump is not None:
+            self.delay += jump
+            self._forget_misses()
         return None
