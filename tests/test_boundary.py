@@ -332,6 +332,22 @@ def test_a_step_of_about_a_period_is_found_though_the_next_pulse_lands_where_one
         assert found - at < 0.17
 
 
+def test_the_pulses_a_step_hid_are_heard_once_it_is_found(glass_room):
+    # A step of the round trip is found from two pulses whose direct sounds were not where they
+    # were due; their echoes were dropped, and a wall's young track, two pulses short, lost its
+    # surface (seed 23000's room 12, all at once). Once the step is found they are heard again
+    # with the new round trip: no pulse of the walk goes uncommitted, whichever way it steps.
+    for at, step in ((0.7, -2048), (1.0, 1024), (1.2, 512)):
+        walk = record_walk(glass_room, np.random.default_rng(2), link=AudioLink(0.06, steps=((at, step),)))
+        mon = _monitor()
+        heard, commit = [], mon._commit
+        mon._commit = lambda t, *args: (heard.append(t), commit(t, *args))
+        for i in range(0, len(walk.mic), 480):
+            mon.process(walk.mic[i:i + 480], np.zeros(len(walk.mic[i:i + 480])))
+        emitted = [mon.schedule.emission(k) / FS for k in range(100)]
+        assert [t for t in emitted if 0.3 < t < len(walk.mic) / FS - 0.1 and t not in heard] == []
+
+
 @pytest.fixture(scope="module")
 def door_room():
     scene, start, target, plane = _geometry("open")

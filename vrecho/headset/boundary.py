@@ -486,8 +486,7 @@ class BoundaryMonitor:
             held = env.n - env.size + 2 * GUARD + lock.guard - int(lock.delay)  # pulses whose direct sound is still held
             self._next = max(self._next, self.schedule.first_at_or_after(max(held, 0)))
             env.redo(int(lock.due(self._next)) - lock.guard - 4)  # the search's envelope was all codes': each its own now
-        sch = self.schedule
-        changed = False
+        sch, changed = self.schedule, False
         while lock.delay is not None:
             k = self._next
             due = lock.due(k)
@@ -504,16 +503,19 @@ class BoundaryMonitor:
                 env.searching = True
                 self._level, self._verdict_track, self._verdict = "clear", None, Alert(flags=("unlocked",))
                 return
-            if abs(lock.delay - before) > lock.guard:  # a step of whole blocks: the next window afresh
-                env.redo(int(lock.due(k + 1)) - lock.guard - 4)
+            if abs(lock.delay - before) > lock.guard:  # a step of whole blocks: heard afresh from the first
+                j, lock.replay, held = lock.replay, None, env.n - env.size + GUARD  # pulse it hid (samples held)
+                self._next = j if j is not None and j <= k and int(lock.due(j)) - lock.guard - 4 >= held else k + 1
+                env.redo(int(lock.due(self._next)) - lock.guard - 4)
+                if self._next <= k:
+                    continue
             if ref is not None:
                 echoes = self._echoes.find(self._env, ref, end, code=sch.code(k), clipped=self._clipped_at > ref - 8192)
                 if echoes is not None:
                     t = sch.emission(k) / self.fs
                     faint = self._faint.add(t, *self._echoes.last, self._still) if self._echoes.last else ((), ())
                     self._commit(t, echoes, *faint)
-                    changed = True
-                    self._ends_for = -1
+                    changed, self._ends_for = True, -1
             self._next = k + 1
         partial = None  # (k, due and ready: the pulse the loop stopped at)
         if ready > due + self._env.m:

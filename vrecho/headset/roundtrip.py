@@ -43,6 +43,9 @@ class RoundTrip:
         How much it changes a pulse, in samples (the clocks' drift).
     level : float
         The direct sound's envelope peak, a running estimate (0 before the first lock).
+    replay : int or None
+        The first pulse a step just found had hidden (its direct sound missed where it was due,
+        found where the step put it): the monitor hears it again; None when there is none.
     searching_since : int
         The sample from which the monitor has been searching (while not locked).
     """
@@ -60,6 +63,7 @@ class RoundTrip:
         self._suspect = False  # the stream said it lost samples
         self._missed: list[int] = []  # the pulses missed since the last one followed (the last three)
         self._scans: dict[int, tuple[bool, list[float]]] = {}  # theirs: (scanned wholly, arrivals' offsets)
+        self.replay: int | None = None
 
     def _forget_misses(self) -> None:
         """A fresh start for :meth:`follow`: no pulse missed, no jump pending, no loss reported."""
@@ -211,8 +215,7 @@ class RoundTrip:
                 self._missed = self._missed[-2:] + [k]
             step, candidates = self._step(env)
             if step is not None:  # the same jump in two of the pulses missed: a step, taken at once
-                self.delay += step
-                self._forget_misses()
+                self._take(step)
             elif self._misses >= 4 or (not candidates and (self._misses >= 2 or self._suspect)):
                 self.unlock(now)
             return None
@@ -237,6 +240,13 @@ class RoundTrip:
         self._missed = self._missed[-2:] + [k]
         jump, _ = self._step(env)
         if jump is not None:
-            self.delay += jump
-            self._forget_misses()
+            self._take(jump)
         return None
+
+    def _take(self, step: float) -> None:
+        """A step of the round trip found in the missed pulses' arrivals: taken, and the first
+        of those pulses whose arrival it explains is to be heard again (:attr:`replay`)."""
+        hid = [j for j in self._missed if any(abs(o - step) <= 1.5 for o in self._scans[j][1])]
+        self.delay += step
+        self.replay = min(hid) if hid else None
+        self._forget_misses()
