@@ -497,6 +497,14 @@ def cautioned(r: dict) -> bool:
     return bool(r["first_alert"]) and r["first_alert"]["distance_m"] >= 0.5
 
 
+def outcomes(rs: list[dict]) -> tuple[list, list, list, list]:
+    """Walks' results split: those toward surfaces and those cautioned in time; those through
+    doors and past, and those that alerted (false alarms)."""
+    closed = [r for r in rs if r["kind"] in CLOSED]
+    passing = [r for r in rs if r["kind"] not in CLOSED]
+    return closed, [r for r in closed if cautioned(r)], passing, [r for r in passing if r["first_alert"]]
+
+
 def table(rows_out: list[dict], rows: tuple) -> list[str]:
     lines = ["| condition | walks toward glass / mirror / wall | caution before 0.5 m | walks through doors / past "
              "| false alarms | distance error median / p90 | round trip error median / p99, lock | named right at stop "
@@ -505,10 +513,7 @@ def table(rows_out: list[dict], rows: tuple) -> list[str]:
         rs = [r for r in rows_out if r["row"] == row and "skipped" not in r]
         if not rs:
             continue
-        closed = [r for r in rs if r["kind"] in CLOSED]
-        passing = [r for r in rs if r["kind"] not in CLOSED]
-        hit = [r for r in closed if cautioned(r)]
-        fa = [r for r in passing if r["first_alert"]]
+        closed, hit, passing, fa = outcomes(rs)
         errs = np.array([e for r in closed for e in r["errors"]] or [np.nan])
         lat = np.array([e for r in rs for e in r["lat_err"]] or [np.nan]) * 1e3
         lock = np.median([r["locked_at"] for r in rs if r["locked_at"] is not None] or [np.nan])
@@ -553,12 +558,9 @@ def compare(runs: list[tuple[str, list[dict]]]) -> list[str]:
         cells = []
         for _, walks in runs:
             rs = [w for w in walks if "skipped" not in w and (row is None or w["row"] == row)]
-            closed = [w for w in rs if w["kind"] in CLOSED]
-            passing = [w for w in rs if w["kind"] not in CLOSED]
-            fa = sum(bool(w["first_alert"]) for w in passing)
-            share = f" ({fa / max(len(passing), 1):.1%})" if row is None else ""
-            cells.append(f"{sum(map(cautioned, closed)) / max(len(closed), 1):.1%} / {fa} of {len(passing)}{share}"
-                         if rs else "-")
+            closed, hit, passing, fa = outcomes(rs)
+            share = f" ({len(fa) / max(len(passing), 1):.1%})" if row is None else ""
+            cells.append(f"{len(hit) / max(len(closed), 1):.1%} / {len(fa)} of {len(passing)}{share}" if rs else "-")
         lines.append(f"| {row or '**all rows**'} | " + " | ".join(cells) + " |")
     return lines
 

@@ -69,13 +69,15 @@ class RoundTrip:
         """A fresh start for :meth:`follow`: no pulse missed, no jump pending, no loss reported."""
         self._misses, self._pending, self._suspect, self._missed, self._scans = 0, None, False, [], {}
 
-    def _step(self, env: Envelope) -> tuple[float | None, bool]:
+    def _step(self, env: Envelope) -> tuple[bool, bool]:
         """After missed pulses: each one's arrivals within :data:`STEP_S` of where it was due,
         as offsets from there (strong ones: as strong as the direct sound is followed); an offset
         common to two of them, the earliest (the direct sound before its echoes), is a step of
-        the round trip. The other pulses' direct sounds fall at offsets that change with the
-        dither, and another headset's pings with its own; the search's three pulses are not
-        waited for. Returns the step (None: none yet) and whether any pulse had candidates."""
+        the round trip, taken at once, and the first of the pulses whose arrival it explains is
+        to be heard again (:attr:`replay`). The other pulses' direct sounds fall at offsets that
+        change with the dither, and another headset's pings with its own; the search's three
+        pulses are not waited for. Returns whether a step was taken and whether any pulse had
+        candidates."""
         reach = int(STEP_S * self.schedule.fs)
         for j in self._missed:
             if j in self._scans and self._scans[j][0]:
@@ -87,7 +89,14 @@ class RoundTrip:
             self._scans[j] = (lo + len(seg) >= int(due) + reach, offsets)
         common = [0.5 * (a + b) for i, j1 in enumerate(self._missed) for j2 in self._missed[i + 1:]
                   for a in self._scans[j1][1] for b in self._scans[j2][1] if abs(a - b) <= 1.5]
-        return (min(common) if common else None), any(self._scans[j][1] for j in self._missed)
+        candidates = any(self._scans[j][1] for j in self._missed)
+        if not common:
+            return False, candidates
+        step = min(common)
+        self.replay = min(j for j in self._missed if any(abs(o - step) <= 1.5 for o in self._scans[j][1]))
+        self.delay += step
+        self._forget_misses()
+        return True, candidates
 
     def unlock(self, now: int) -> None:
         """Search again from sample ``now`` on.
@@ -213,10 +222,8 @@ class RoundTrip:
             end = int(due) + self.guard + env.m
             if env.sound_until(a, end) == end:  # (not a dropout's: there, nothing tells of a step)
                 self._missed = self._missed[-2:] + [k]
-            step, candidates = self._step(env)
-            if step is not None:  # the same jump in two of the pulses missed: a step, taken at once
-                self._take(step)
-            elif self._misses >= 4 or (not candidates and (self._misses >= 2 or self._suspect)):
+            stepped, candidates = self._step(env)  # (the same jump in two of the pulses missed: taken)
+            if not stepped and (self._misses >= 4 or (not candidates and (self._misses >= 2 or self._suspect))):
                 self.unlock(now)
             return None
         at = a + float(parabolic_peaks(seg, (p,))[0])
@@ -226,11 +233,11 @@ class RoundTrip:
         if abs(step) <= 1.5:  # the clocks' drift: followed (an alpha-beta filter of delay and its rate)
             self.delay += self.rate + 0.3 * step
             self.rate += 0.02 * step
-            self._pending, self._missed, self._scans = None, [], {}
+            self._forget_misses()
             return e + self.delay
         if self._pending is not None and abs(step - self._pending) <= 1.5:  # a step, seen twice
             self.delay += step
-            self._pending, self._missed, self._scans = None, [], {}
+            self._forget_misses()
             return at
         # Once: a small step, or another pulse's direct sound (its code the same) that a step of
         # about a period brought here. Not trusted; where this pulse's own arrival went is looked
@@ -238,15 +245,5 @@ class RoundTrip:
         # sound here every other pulse, and the lock lost 280 ms finding it).
         self._pending = step
         self._missed = self._missed[-2:] + [k]
-        jump, _ = self._step(env)
-        if jump is not None:
-            self._take(jump)
+        self._step(env)
         return None
-
-    def _take(self, step: float) -> None:
-        """A step of the round trip found in the missed pulses' arrivals: taken, and the first
-        of those pulses whose arrival it explains is to be heard again (:attr:`replay`)."""
-        hid = [j for j in self._missed if any(abs(o - step) <= 1.5 for o in self._scans[j][1])]
-        self.delay += step
-        self.replay = min(hid) if hid else None
-        self._forget_misses()
