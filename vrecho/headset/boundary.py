@@ -504,8 +504,8 @@ class BoundaryMonitor:
                 self._level, self._verdict_track, self._verdict = "clear", None, Alert(flags=("unlocked",))
                 return
             if abs(lock.delay - before) > lock.guard:  # a step of whole blocks: heard afresh from the first
-                j, lock.replay, held = lock.replay, None, env.n - env.size + GUARD  # pulse it hid (samples held)
-                self._next = j if j is not None and j <= k and int(lock.due(j)) - lock.guard - 4 >= held else k + 1
+                j, lock.replay, oldest = lock.replay, None, env.n - env.size + GUARD  # pulse it hid (samples held)
+                self._next = j if j is not None and j <= k and int(lock.due(j)) - lock.guard - 4 >= oldest else k + 1
                 env.redo(int(lock.due(self._next)) - lock.guard - 4)
                 if self._next <= k:
                     continue
