@@ -24,7 +24,8 @@ from scipy.signal import chirp
 from scipy.signal.windows import tukey
 
 from ..errors import VrechoError
-from ..signals import analytic_envelope, analytic_filter
+from ..signals import analytic_filter
+from .kernels import correlate
 
 GUARD = 16
 """Samples of guard at each edge of a piece of the streamed envelope (the analytic signal's tails
@@ -384,7 +385,7 @@ class Envelope:
         if kernel is None:
             sound = sum(self.probes) if code is None else self.probes[code]
             kernel = self._kernels[(nfft, code)] = analytic_filter(sound, nfft).astype(np.complex64)
-        return analytic_envelope(seg, kernel, nfft)[GUARD:GUARD + hi - lo]
+        return correlate(seg, kernel, nfft, GUARD, hi - lo)
 
     def scan(self, lo: int, hi: int, code: int) -> tuple[int, np.ndarray]:
         """The envelope for one code at lags ``lo`` to ``hi``, computed afresh from the samples
