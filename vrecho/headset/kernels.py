@@ -215,8 +215,7 @@ def echo_peaks(span, lo, threshold, peak_direct, sidelobe, lobes, offset, metres
     """
     n = len(span)
     quarter = span[lo::4].astype(np.float64)
-    quarter.sort()
-    floor = threshold * (quarter[len(quarter) // 2] + 1e-12)
+    floor = threshold * (np.partition(quarter, len(quarter) // 2)[len(quarter) // 2] + 1e-12)  # (the median: its upper one)
     at = np.empty(n, np.int64)
     count = 0
     for i in range(lo + 1, n - 1):
