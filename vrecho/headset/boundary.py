@@ -503,8 +503,8 @@ class BoundaryMonitor:
                 env.searching = True
                 self._level, self._verdict_track, self._verdict = "clear", None, Alert(flags=("unlocked",))
                 return
-            if abs(lock.delay - before) > lock.guard:  # a step of whole blocks: heard afresh from the first
-                j, lock.replay, oldest = lock.replay, None, env.n - env.size + GUARD  # pulse it hid (samples held)
+            if lock.replay is not None or abs(lock.delay - before) > lock.guard:  # a step: heard afresh from the
+                j, lock.replay, oldest = lock.replay, None, env.n - env.size + GUARD  # first pulse it hid (samples held)
                 self._next = j if j is not None and j <= k and int(lock.due(j)) - lock.guard - 4 >= oldest else k + 1
                 env.redo(int(lock.due(self._next)) - lock.guard - 4)
                 if self._next <= k:

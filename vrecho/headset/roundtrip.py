@@ -45,7 +45,8 @@ class RoundTrip:
         The direct sound's envelope peak, a running estimate (0 before the first lock).
     replay : int or None
         The first pulse a step just found had hidden (its direct sound missed where it was due,
-        found where the step put it): the monitor hears it again; None when there is none.
+        found where the step put it; or a small step's first pulse, not trusted alone): the
+        monitor hears it again; None when there is none.
     searching_since : int
         The sample from which the monitor has been searching (while not locked).
     """
@@ -59,7 +60,7 @@ class RoundTrip:
         self.level = 0.0
         self.searching_since = 0
         self._misses = 0  # direct sounds missed running
-        self._pending: float | None = None  # a jump seen once near where the direct sound was due
+        self._pending: tuple[float, int] | None = None  # a jump seen once near where the direct sound was due, its pulse
         self._suspect = False  # the stream said it lost samples
         self._missed: list[int] = []  # the pulses missed since the last one followed (the last three)
         self._scans: dict[int, tuple[bool, list[float]]] = {}  # theirs: (scanned wholly, arrivals' offsets)
@@ -235,15 +236,16 @@ class RoundTrip:
             self.rate += 0.02 * step
             self._forget_misses()
             return e + self.delay
-        if self._pending is not None and abs(step - self._pending) <= 1.5:  # a step, seen twice
-            self.delay += step
+        if self._pending is not None and abs(step - self._pending[0]) <= 1.5:  # a step, seen twice: heard
+            self.delay += step  # again from the pulse it was first seen in
+            self.replay = self._pending[1]
             self._forget_misses()
             return at
         # Once: a small step, or another pulse's direct sound (its code the same) that a step of
         # about a period brought here. Not trusted; where this pulse's own arrival went is looked
         # for as a missed pulse's is (a step of 2048 samples at 48 kHz put the next pulse's direct
         # sound here every other pulse, and the lock lost 280 ms finding it).
-        self._pending = step
+        self._pending = (step, k)
         self._missed = self._missed[-2:] + [k]
         self._step(env)
         return None
