@@ -496,16 +496,15 @@ class BoundaryMonitor:
                 break
             env.skip(int(due) - lock.guard - 4)  # locked: only the pulses' windows are looked at
             env.compute(end, code=sch.code(k))
-            before = lock.delay
             ref = lock.follow(env, k, self._now)
             if lock.delay is None:  # lost: no alarm, and search again from the next block
                 self._searched = -self.period
                 env.searching = True
                 self._level, self._verdict_track, self._verdict = "clear", None, Alert(flags=("unlocked",))
                 return
-            if lock.replay is not None or abs(lock.delay - before) > lock.guard:  # a step: heard afresh from the
-                j, lock.replay, oldest = lock.replay, None, env.n - env.size + GUARD  # first pulse it hid (samples held)
-                self._next = j if j is not None and j <= k and int(lock.due(j)) - lock.guard - 4 >= oldest else k + 1
+            if lock.replay is not None:  # a step (every one names the pulse it hid): heard afresh from that
+                j, lock.replay, oldest = lock.replay, None, env.n - env.size + GUARD  # pulse (its samples held)
+                self._next = j if int(lock.due(j)) - lock.guard - 4 >= oldest else k + 1
                 env.redo(int(lock.due(self._next)) - lock.guard - 4)
                 if self._next <= k:
                     continue

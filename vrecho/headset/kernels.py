@@ -1,5 +1,5 @@
 """The headset call's per-pulse work, compiled (numba, cached on disk): the block's read
-(:func:`take`), the envelope of a pulse's window (:func:`correlate`: its FFTs by rocket-fft, pocketfft
+(:func:`take`), the envelope of a pulse's window (:func:`correlate`: its FFTs rocket-fft's, ducc0's
 inside numba), a pulse's echoes in its envelope (:func:`echo_peaks`, their distances
 :func:`echo_distance`, the inverse of :func:`echo_path`), their pairing with the tracks (:func:`pair`, strengths weighed by
 :func:`amplitude_llr`), the lines that start tracks (:func:`lines`), and the tracks' fits

@@ -19,7 +19,6 @@ trip is :mod:`.roundtrip`'s.
 from __future__ import annotations
 
 import numpy as np
-from scipy import fft
 from scipy.signal import chirp
 from scipy.signal.windows import tukey
 
