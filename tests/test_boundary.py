@@ -9,6 +9,7 @@ from conftest import small_room
 from vrecho.errors import VrechoError
 from vrecho.headset import BoundaryMonitor
 from vrecho.sim.render import World
+from vrecho.sim.people import Passerby, passersby, with_passersby
 from vrecho.sim.walks import AudioLink, Headset, echo_round_trip_s, headset_frames, other_headsets, record_walk, simulate_walk, \
     walk_responses
 
@@ -361,6 +362,41 @@ def test_other_headsets_pings_are_never_taken_for_echoes(glass_room, door_room):
     for room, closed in ((door_room, False), (glass_room, True)):
         others = other_headsets(room, 2, np.random.default_rng(7))
         walk = record_walk(room, np.random.default_rng(8), link=AudioLink(0.03), others=others)
+        _, alerts, ends = _run(walk)
+        if closed:
+            at, err, _ = _judged(walk, alerts, ends)
+            assert at is not None and at >= 0.5 and err < 0.01
+        else:
+            assert all(a.level == "clear" for a in alerts)
+
+
+def test_people_walking_past_are_heard_where_they_are_and_raise_no_alert(glass_room, door_room):
+    # A person's body echoes where geometry puts it (loudspeaker to body to microphone), only while
+    # they are in the room; people walking past (never within 0.6 m) raise nothing through the
+    # door, and the glass is still warned in time.
+    k = 30
+    head, mic = door_room.position_m[k], door_room.mic_m[k]
+    t = door_room.written[k] / FS
+    side = np.cross([0.0, 0.0, 1.0], door_room.forward[k])[:2]
+    person = Passerby(tuple(head[:2] + 1.2 * door_room.forward[k][:2] - 1.5 * t * side), tuple(1.5 * side), 0.2,
+                      1.8, 0.7, (t - 0.5, t + 0.5))  # across the way 1.2 m ahead, level with the wearer at pulse k
+    heard = with_passersby(door_room, [person])
+    echo = heard.responses[k] - door_room.responses[k]
+    centre = np.r_[person.at(t), 0.5 * (head[2] + mic[2])]
+    point = centre + 0.2 * (0.5 * (head + mic) - centre) / np.linalg.norm(0.5 * (head + mic) - centre)
+    path = np.linalg.norm(point - head) + np.linalg.norm(point - mic)
+    assert abs(np.argmax(np.abs(echo)) - path / 343.0 * FS) <= 1
+    assert 0.02 / path < np.abs(echo).max() < 0.5 / path  # under half a plane's echo at that path (1 / path)
+    assert np.array_equal(heard.responses[0], door_room.responses[0]) and door_room.responses[k] is not heard.responses[k]
+    for room, closed in ((door_room, False), (glass_room, True)):
+        people = passersby(room, 2, np.random.default_rng(3))
+        assert len(people) == 2
+        for p in people:
+            times = room.written / FS
+            on = (times >= p.present_s[0]) & (times <= p.present_s[1])
+            gaps = np.linalg.norm(np.array([p.at(x) for x in times[on]]) - room.position_m[on, :2], axis=1) - p.radius_m
+            assert gaps.min() >= 0.6 and times[on][-1] - times[on][0] >= 1.0
+        walk = record_walk(with_passersby(room, people), np.random.default_rng(4), link=AudioLink(0.03))
         _, alerts, ends = _run(walk)
         if closed:
             at, err, _ = _judged(walk, alerts, ends)

@@ -15,7 +15,8 @@ Two steps, so that one walk's room is simulated once and heard through many stre
   round trip from loudspeaker write to microphone read, steps of it by whole blocks as after an
   underrun, the two clocks drifting apart), with the pings of other headsets in the room
   (:func:`other_headsets`, each on its own dithered schedule), ambient sound (speech, music, TV,
-  a fan) and pink noise below the direct sound, and microphone self-noise.
+  a fan) and pink noise below the direct sound, and microphone self-noise. People walking past
+  add their bodies' echoes to the responses (:mod:`vrecho.sim.people`).
 
 :func:`simulate_walk` does both. Times: the monitor writes pulse ``k`` at sample ``e_k`` of the
 stream (:class:`~vrecho.headset.ProbeSchedule`); the loudspeaker plays it ``output_share`` of the
