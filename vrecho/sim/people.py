@@ -59,8 +59,9 @@ class Passerby:
 def passersby(walk: WalkResponses, n: int, rng: np.random.Generator, *, gap_m: tuple[float, float] = (0.6, 2.0)) -> list:
     """``n`` people walking past the wearer, at 0.8 to 1.6 m/s in any direction (across the way
     ahead or behind, the other way alongside, overtaking): each passes the headset within
-    ``gap_m`` of their body at some moment of the walk's middle half, and never nearer than its
-    lower bound (nothing the wearer walks into). They are in the room (its air, clear of its
+    ``gap_m`` of their body at some moment of the walk's middle half, and their straight path
+    never nearer than its lower bound over the whole walk (nothing the wearer walks into, nor
+    anyone on a course to meet the wearer). They are in the room (its air, clear of its
     furniture) for at least a second about that moment, and heard while they are.
 
     Parameters
@@ -101,7 +102,9 @@ def passersby(walk: WalkResponses, n: int, rng: np.random.Generator, *, gap_m: t
                 lo -= 1
             while hi + 1 < len(t) and inside[hi + 1]:
                 hi += 1
-            if (np.linalg.norm(path - head, axis=1)[lo:hi + 1].min() - radius >= gap_m[0]
+            # Past, not into: their straight path keeps its distance over the whole walk, out of the room
+            # too (one who came that near, there, would have been walking into the wearer).
+            if (np.linalg.norm(path - head, axis=1).min() - radius >= gap_m[0]
                     and t[hi] - t[lo] >= min(1.0, t[-1] - t[0])):
                 out.append(Passerby(tuple(where - t[k] * velocity), tuple(velocity), radius,
                                     float(rng.uniform(1.55, 1.95)), float(rng.uniform(0.5, 0.9)),
