@@ -22,11 +22,11 @@ seed (a faint tick), and:
    ``L = sqrt((2 d)^2 + s^2)`` (``s``: loudspeaker to microphone): ``d`` follows.
 2. **Tracking.** Echo distances are chained over pulses into tracks (the closest pairs of echo
    and prediction first, within each track's gate: 12 cm while young, then five times its rms
-   residual, at least 4 cm); a track starts from three echoes no track took in a line over three
-   pulses at a walking pace (:func:`~.tracks.initiate`: where other headsets' pings crowd the
-   range, one echo says nothing of its speed), or from a line of faint echoes, too weak for one
-   pulse and summed along each approach over eight (:mod:`.faint`), which also keep a track that
-   missed a pulse's echo; a Kalman filter gives each track's distance and closing speed.
+   residual, at least 4 cm); a track starts from three echoes no track took (or took over half
+   its gate off) in a line over three pulses at a walking pace (:func:`~.tracks.initiate`: where
+   other headsets' pings crowd the range, one echo says nothing of its speed), or from a line of
+   faint echoes summed along each approach over eight pulses (:mod:`.faint`), which also keep a
+   track that missed a pulse's echo; a Kalman filter gives each track's range and closing speed.
 3. **Alerts with hysteresis.** Only surfaces the wearer moves toward count (``approach_m``
    nearer within 0.8 s, in the last second) and will not pass by: a point at lateral offset
    ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, so a quadratic fit over the last 0.3 to 0.6 s
@@ -570,11 +570,12 @@ class BoundaryMonitor:
         mean_strength = clutter_strength(echoes)
         fresh = []
         for tr, d, strength in associate(self._tracks, t, echoes):
-            if tr is None:
-                fresh.append((d, strength))
-                continue
-            tr.update(t, d, strength, clutter_per_m=clutter, clutter_strength=mean_strength)
-            updated.append(tr)
+            if tr is None or abs(d - tr.predict(t)) > 0.5 * tr.gate_m:  # (taken far off its track's line: may
+                fresh.append((d, strength))  # be another surface's, whose range the track crossed, and start its own)
+            if tr is not None:
+                tr.update(t, d, strength, clutter_per_m=clutter, clutter_strength=mean_strength)
+                updated.append(tr)
+        fresh.sort()
         seeded, lifted = attach_faint(self._tracks, t, faint, lines, clutter, mean_strength, fresh)
         updated += lifted
         for tr in self._tracks:
