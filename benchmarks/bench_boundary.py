@@ -38,7 +38,8 @@ rows are run) and heard through each row's stream:
 - people walking past: one or two people (``vrecho.sim.people.passersby``: an upright body, its
   echo off a cylinder of 0.15 to 0.25 m, 0.5 to 0.9 of the sound's pressure sent back) walk
   past at 0.8 to 1.6 m/s in any direction, their bodies 0.6 to 2 m from the headset at their
-  nearest: across the way, the other way alongside, overtaking (nothing the wearer walks into);
+  nearest: across the way, the other way alongside, overtaking (nothing the wearer walks into,
+  nobody on a course to meet the wearer);
 - all at once: furnished, any headset, 0 to 300 ms stepping, drift, two other headsets, noise,
   disturbed, blocks of 16 to 4096, one or two people walking past.
 
@@ -86,9 +87,9 @@ from vrecho.headset.echoes import mic_geometry
 from vrecho.headset.kernels import echo_path
 from vrecho.scene import Discontinuity
 from vrecho.signals import SPEED_OF_SOUND, analytic_envelope, analytic_filter
+from vrecho.sim.people import passersby, with_passersby
 from vrecho.sim.render import World
 from vrecho.sim.scenes import closed_absorption, random_furniture, random_scene
-from vrecho.sim.people import passersby, with_passersby
 from vrecho.sim.walks import AMBIENT_KINDS, AudioLink, Headset, Walk, headset_frames, other_headsets, record_walk, \
     walk_responses
 
