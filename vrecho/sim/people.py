@@ -11,6 +11,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..signals import SPEED_OF_SOUND
+from .acoustics import direct_amplitude
 from .walks import WalkResponses
 
 
@@ -116,11 +117,11 @@ def passersby(walk: WalkResponses, n: int, rng: np.random.Generator, *, gap_m: t
 def with_passersby(walk: WalkResponses, people: list) -> WalkResponses:
     """The walk's responses with each person's echo added: one specular reflection off their
     body, loudspeaker to body to microphone (geometric acoustics: a convex body's echo is a
-    plane's, 1 / path as pyroomacoustics scales its own, times sqrt(a / (a + R)) for an upright
-    cylinder of radius a at range R, a / (a + R) for a sphere), through the loudspeaker's directivity toward them, at
-    its fractional delay (a Hann-windowed sinc, as pyroomacoustics places its own). Their
-    reflections by way of the room's surfaces, and the shadow they cast on its echoes, are not
-    simulated.
+    plane's, :func:`~vrecho.sim.acoustics.direct_amplitude` of the path as pyroomacoustics scales
+    its own, times sqrt(a / (a + R)) for an upright cylinder of radius a at range R, a / (a + R)
+    for a sphere), through the loudspeaker's directivity toward them, at its fractional delay (a
+    Hann-windowed sinc, as pyroomacoustics places its own). Their reflections by way of the
+    room's surfaces, and the shadow they cast on its echoes, are not simulated.
 
     Parameters
     ----------
@@ -144,25 +145,27 @@ def with_passersby(walk: WalkResponses, people: list) -> WalkResponses:
         speaker, mic = walk.position_m[k], walk.mic_m[k]
         axis = walk.headset.world(walk.forward[k]) @ np.asarray(walk.headset.speaker_axis, float)
         mid = 0.5 * (speaker + mic)
+        t = walk.written[k] / fs
         for person in people:
-            if not person.present_s[0] <= walk.written[k] / fs <= person.present_s[1]:
+            if not person.present_s[0] <= t <= person.present_s[1]:
                 continue
-            where = person.at(walk.written[k] / fs)
-            if mid[2] < person.height_m - 0.1:  # level with the body: an upright cylinder
+            where = person.at(t)
+            body = mid[2] < person.height_m - 0.1  # level with the body: an upright cylinder
+            if body:
                 a, centre = person.radius_m, np.r_[where, mid[2]]
-            else:  # above the shoulders: the head
+            else:  # above the shoulders: the head, a sphere
                 a, centre = 0.1, np.r_[where, person.height_m - 0.1]
             toward = mid - centre
             point = centre + a * toward / np.linalg.norm(toward)  # where the echo reflects
             r_s, r_m = np.linalg.norm(point - speaker), np.linalg.norm(point - mic)
             r = 0.5 * (r_s + r_m)
-            curved = np.sqrt(a / (a + r)) if a == person.radius_m else a / (a + r)
+            curved = np.sqrt(a / (a + r)) if body else a / (a + r)
             gain = p + (1 - p) * float(axis @ (point - speaker)) / (np.linalg.norm(axis) * r_s)
             at = (r_s + r_m) / SPEED_OF_SOUND * fs
             i = int(np.floor(at))
             idx = i + taps
             keep = (idx >= 0) & (idx < len(h))
-            h[idx[keep]] += (person.reflectance * gain * curved / (r_s + r_m)
+            h[idx[keep]] += (direct_amplitude(r_s + r_m, person.reflectance * gain * curved)
                              * np.sinc(taps - (at - i)) * window)[keep]
         responses.append(h)
     return replace(walk, responses=responses)
