@@ -7,6 +7,7 @@ import pytest
 
 from conftest import small_room
 from vrecho.errors import VrechoError
+from vrecho.signals import SPEED_OF_SOUND
 from vrecho.headset import BoundaryMonitor
 from vrecho.sim.render import World
 from vrecho.sim.people import Passerby, passersby, with_passersby
@@ -661,6 +662,24 @@ def test_a_phantom_speed_behind_does_not_hold_back_a_wall_ahead():
     mon._tracks, mon._now = [wall, behind], int((wall.times[-1] + 0.02) * FS)
     mon._judge(None, wall.times[-1] + 0.04)
     assert mon._level == "caution" and mon._pace == 2.0
+
+
+def test_a_wall_nearing_fast_on_a_long_round_trip_is_cautioned_where_the_wearer_is():
+    # A round trip of 250 ms (an ordinary desktop's): the echo heard now left the wall 0.375 m ago
+    # at 1.5 m/s. A wall nearing steadily, not yet fitted, whose last echo read 1.2 m, is by now
+    # some 0.83 m off, 0.55 s from contact: caution, where reading the echo's own 1.2 m waited a
+    # pulse or more (seed 26000's room 3, all at once: 0.48 -> 0.87 m before the wall). With no
+    # round trip (the echo as fresh as it is heard), the same track waits.
+    levels = []
+    for latency_s in (0.25, None):
+        mon = _monitor()
+        wall = _line_track(1.2 + 1.5 * 0.44, -1.5, 12, 25.0)
+        if latency_s is not None:
+            mon._lock.delay = latency_s * FS + mon._mic[0] / SPEED_OF_SOUND * FS
+        mon._tracks, mon._now = [wall], int((wall.times[-1] + 0.02) * FS)
+        mon._judge(None, wall.times[-1] + 0.04)
+        levels.append((wall.ahead, mon.latency_s is not None and round(mon.latency_s, 3), mon._level))
+    assert levels == [(None, 0.25, "caution"), (None, False, "clear")]
 
 
 def _among_pings(own: float, ping: float, n_pings: int, seconds: float, seed: int) -> np.ndarray:

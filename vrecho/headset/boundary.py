@@ -53,10 +53,10 @@ its echo ends, an undecided surface asked again with it).
 The per-pulse work (echoes, faint ones, association, the fits, each block's read) runs in kernels
 compiled by numba and cached (at install and when the first monitor is made, never in a callback).
 
-Robustness: clipped samples are flagged (the timing survives clipping, and the clipped direct
-sound's distortion is kept out); runs of exact zeros (dropouts) and non-finite samples are
-flagged, and a pulse's window ends where they begin (the echoes heard wholly before them count;
-none if they reach the direct sound); any block size, changing from call to call; 44.1 or 48 kHz.
+Robustness: clipped samples are flagged (the timing survives clipping, and the clipped direct sound's
+distortion is kept out); runs of exact zeros (dropouts) and non-finite samples are flagged, and a
+pulse's window ends where they begin (the echoes heard wholly before them count; none if they reach the
+direct sound); any block size, changing from call to call; 44.1 or 48 kHz.
 
 ``surface``: "opening" when the wearer moves and nothing ahead echoes; for an echoing surface
 ahead, "closed" until the headset's camera has been shown it, then what the camera makes of it
@@ -518,8 +518,7 @@ class BoundaryMonitor:
             self._next = k + 1
         partial = None  # (k, due and ready: the pulse the loop stopped at)
         if ready > due + self._env.m:
-            # A surface near a threshold: its echo of this pulse may cross it; looked for in the
-            # block that echo ends in (as predicted, +/- 1.5 ms), not in every block.
+            # A surface near a threshold: its echo of this pulse may cross it; looked for in the block it ends in (+/- 1.5 ms).
             margin = 0.0015 * self.fs
             judged = self._judged - self._env.m - GUARD + 1  # the envelope ready at the last judgement
             if self._ends_for != k:  # asked once a pulse: the tracks change only when a pulse is committed
@@ -662,12 +661,13 @@ class BoundaryMonitor:
                 self._oldest_approach = min(self._oldest_approach, tr.approached_at)
                 level = self._level_for(d_now, ttc, aside)
             elif (len(tr.times) >= 5 and closing >= 0.5 and at - tr.times[-5] < 0.45 and tr.score >= _LOOMING
-                  and d < self.caution_m and d / closing < 0.75 and (bend := tr.straight(8))[0] < 0.005 and bend[1] < 0.03
+                  and (d_rt := d - closing * (self.latency_s or 0.0)) < self.caution_m and d_rt / closing < 0.75
+                  and (bend := tr.straight(8))[0] < 0.005 and bend[1] < 0.03
                   and (behind <= closing or d * d * (1.0 - (closing / behind) ** 2) < self.miss_m ** 2)):
-                # Not yet in the way by the fit (it needs a third of a second), but near, nearing fast and steadily
-                # beyond doubt (the score; the last eight echoes on a line within 5 mm, where a still wall's track that
-                # took other headsets' pings bends, the newest within 3 cm: no stray peak just taken; five in 0.45 s),
-                # and not passing by: nearing at c as walls behind recede at v, it lies d sqrt(1 - (c/v)^2) off the way.
+                # Not yet in the way by the fit (it needs a third of a second), but near (nearer by the round trip's walk),
+                # nearing fast and steadily beyond doubt (the score; the last eight echoes on a line within 5 mm, where a still
+                # wall's track that took other headsets' pings bends, the newest within 3 cm: no stray peak just taken; five in
+                # 0.45 s), and not passing by: nearing at c as walls behind recede at v, it lies d sqrt(1 - (c/v)^2) off the way.
                 level = "caution"
             else:
                 continue  # not known to be in the way (asked again with the echo still arriving, if any)
