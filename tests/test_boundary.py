@@ -258,6 +258,35 @@ def test_bad_settings_and_blocks_say_why():
 
 # -- The audio stream's round trip, other headsets (issue 25) -----------------------------------------------
 
+def test_an_echo_louder_than_the_direct_sound_is_not_taken_for_a_step():
+    # Seed 30000's room 13 (latency 0-30 ms): the microphone 8 cm behind a cardioid loudspeaker
+    # hears its direct sound faintly, and a mirror 0.2 m ahead echoes as loud, 55 samples later,
+    # within the lock's guard. The lock took the louder peak for a step, the next pulse's direct
+    # sound where due set it back, and the monitor heard the same two pulses again and again: the
+    # callback never returned. The direct sound where it is due is taken before a louder echo, and
+    # a replay never starts where the last one did.
+    import signal
+
+    behind = Headset((-0.079, 0.032, 0.044), speaker_p=0.5)
+    scene, start, target, plane = _geometry("glass")
+    walk = simulate_walk(scene, start, target, 1.0, _monitor().schedule, plane, np.random.default_rng(0),
+                         headset=behind, stop_m=0.15)
+
+    def hung(*_):
+        raise TimeoutError("the monitor never returned")
+
+    previous = signal.signal(signal.SIGALRM, hung)
+    signal.alarm(60)
+    try:
+        _, alerts, ends = _run(walk, mic_offset_m=behind.mic_offset_m)
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+    locked = [a.latency_s for a in alerts if a.latency_s is not None]
+    assert alerts[-1].latency_s is not None and max(locked) - min(locked) < 1e-4  # locked to the end, unmoved
+    assert _first(alerts, ends, walk, ("caution", "stop"))[2] >= 0.5
+
+
 @pytest.fixture(scope="module")
 def glass_room():
     """The glass walk's room, simulated once, to be heard through many streams."""

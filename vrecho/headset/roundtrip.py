@@ -46,7 +46,8 @@ class RoundTrip:
     replay : int or None
         The first pulse a step just found had hidden (its direct sound missed where it was due,
         found where the step put it; or a small step's first pulse, not trusted alone): the
-        monitor hears it again; None when there is none.
+        monitor hears it again; None when there is none. Each replay starts later than the one
+        before (:meth:`_replay_from`): a stream the lock cannot settle on is never heard in a loop.
     searching_since : int
         The sample from which the monitor has been searching (while not locked).
     """
@@ -65,10 +66,15 @@ class RoundTrip:
         self._missed: list[int] = []  # the pulses missed since the last one followed (the last three)
         self._scans: dict[int, tuple[bool, list[float]]] = {}  # theirs: (scanned wholly, arrivals' offsets)
         self.replay: int | None = None
+        self._replayed = -1  # the pulse the last replay started from
 
     def _forget_misses(self) -> None:
         """A fresh start for :meth:`follow`: no pulse missed, no jump pending, no loss reported."""
         self._misses, self._pending, self._suspect, self._missed, self._scans = 0, None, False, [], {}
+
+    def _replay_from(self, j: int) -> None:
+        """Pulse ``j`` to be heard again, or the first after the last replay's: replays only go on."""
+        self.replay = self._replayed = max(j, self._replayed + 1)
 
     def _step(self, env: Envelope) -> tuple[bool, bool]:
         """After missed pulses: each one's arrivals within :data:`STEP_S` of where it was due,
@@ -89,12 +95,12 @@ class RoundTrip:
             offsets = (lo + parabolic_peaks(seg, peaks) - due).tolist() if len(peaks) else []
             self._scans[j] = (lo + len(seg) >= int(due) + reach, offsets)
         common = [0.5 * (a + b) for i, j1 in enumerate(self._missed) for j2 in self._missed[i + 1:]
-                  for a in self._scans[j1][1] for b in self._scans[j2][1] if abs(a - b) <= 1.5]
+                  for a in self._scans[j1][1] for b in self._scans[j2][1] if abs(a - b) <= 1.5 and abs(a + b) > 3.0]
         candidates = any(self._scans[j][1] for j in self._missed)
         if not common:
             return False, candidates
         step = min(common)
-        self.replay = min(j for j in self._missed if any(abs(o - step) <= 1.5 for o in self._scans[j][1]))
+        self._replay_from(min(j for j in self._missed if any(abs(o - step) <= 1.5 for o in self._scans[j][1])))
         self.delay += step
         self._forget_misses()
         return True, candidates
@@ -217,6 +223,9 @@ class RoundTrip:
         a = int(due) - self.guard
         seg = env.envelope(a, int(due) + self.guard + 2)
         p = int(np.argmax(seg))
+        q = int(due) - a + int(np.argmax(seg[int(due) - a - 1:int(due) - a + 3])) - 1  # (the peak where it is due)
+        if abs(a + p - due) > 1.5 and abs(a + q - due) <= 1.5 and seg[q] >= 0.3 * self.level:
+            p = q  # the direct sound where it is due, before a louder echo (a surface a few cm off, the mic behind)
         peak = float(seg[p])
         if peak < 0.3 * self.level:
             self._misses += 1
@@ -238,7 +247,7 @@ class RoundTrip:
             return e + self.delay
         if self._pending is not None and abs(step - self._pending[0]) <= 1.5:  # a step, seen twice: heard
             self.delay += step  # again from the pulse it was first seen in
-            self.replay = self._pending[1]
+            self._replay_from(self._pending[1])
             self._forget_misses()
             return at
         # Once: a small step, or another pulse's direct sound (its code the same) that a step of
