@@ -53,7 +53,8 @@ The headset's camera (``vrecho.sim.walks.headset_frames``) shows the monitor a f
 
 Reports, per row: caution raised before 0.5 m on walks toward glass, mirrors and walls (the true
 distance when the alert came); false alarms (any caution or stop) on walks through doors and
-past; the distance error median and 90th percentile (the reported distance against the truth
+past (a walk whose callback does not return within a minute and five times the walk's length
+is stopped and said, "hung": a miss toward a surface, a false alarm through a door); the distance error median and 90th percentile (the reported distance against the truth
 at the pulse that measured it, on closed walks); the round trip's error once locked, and how
 long the lock took; the surface named at the first stop; the processing time per 10 ms of
 audio against a baseline timed beside every block (one 1024-point FFT matched filter of a 10 ms
@@ -72,6 +73,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import signal
 import time
 import zlib
 from concurrent.futures import ProcessPoolExecutor
@@ -285,6 +287,19 @@ def baseline() -> None:
     fft.irfft(fft.rfft(_BASE[0], 1024) * _BASE[1], 1024)
 
 
+HUNG_S = 60
+"""Seconds a walk may take beyond five times its audio's length before it counts as hung (a
+callback that never returns: :func:`run_walk` stops it, and the report says so)."""
+
+
+class WalkHung(Exception):
+    """The monitor did not return within :data:`HUNG_S` and five times the walk's length."""
+
+
+def _hung(signum, frame):
+    raise WalkHung
+
+
 def run_walk(walk: Walk, kind: str, seed: int, mic_offset, spec: dict, rng: np.random.Generator, frames: list) -> dict:
     """The monitor over one recorded walk; what it said against the truth."""
     fs = walk.fs
@@ -295,35 +310,43 @@ def run_walk(walk: Walk, kind: str, seed: int, mic_offset, spec: dict, rng: np.r
     errors, spent, base_s, lat_err, locked_at = [], 0.0, 0.0, [], None
     round_trip = (walk.arrival - walk.pulse_times_s * fs) / fs  # per pulse: the direct sound's delay on the stream
     i = 0
-    while i < len(x):
-        n = int(rng.integers(*spec["blocks"]))
-        block = x[i:i + n]
-        indata = block.astype(np.float32)[:, None]  # as sounddevice hands a callback its blocks
-        outdata = np.empty((len(block), 1), np.float32)
-        t = time.perf_counter()
-        mon.callback(indata, outdata, len(block), None, 0)  # (the user's call: the loudspeaker's block filled too)
-        spent += time.perf_counter() - t
-        a = mon.alert
-        t = time.perf_counter()
-        baseline()
-        base_s += (time.perf_counter() - t) * len(block) / (0.01 * fs)  # the baseline per 10 ms of audio
-        i += len(block)
-        t_end = i / fs
-        while frames and frames[0][0] <= t_end:
-            mon.see(*frames.pop(0)[1:])
-        if a.latency_s is not None:
-            locked_at = t_end if locked_at is None else locked_at
-            k = int(np.searchsorted(walk.arrival, i - 0.02 * fs)) - 1  # the last pulse whose direct sound is in
-            if k >= 0:
-                lat_err.append(abs(a.latency_s - round_trip[k]))
-        if a.pulse_time_s is not None and a.distance_m is not None and kind in CLOSED:
-            k = int(np.argmin(np.abs(walk.pulse_times_s - a.pulse_time_s)))
-            if abs(a.distance_m - walk.distance_m[k]) < 0.25:
-                errors.append(abs(a.distance_m - walk.distance_m[k]))
-        if a.level != "clear" and first_alert is None:
-            first_alert = {"distance_m": walk.distance_at(t_end), "level": a.level, "t": t_end}
-        if a.level == "stop" and first_stop is None:
-            first_stop = {"distance_m": walk.distance_at(t_end), "surface": a.surface}
+    signal.signal(signal.SIGALRM, _hung)  # (the pool's processes run each room in their main thread)
+    signal.alarm(int(HUNG_S + 5 * len(x) / fs))
+    try:
+        while i < len(x):
+            n = int(rng.integers(*spec["blocks"]))
+            block = x[i:i + n]
+            indata = block.astype(np.float32)[:, None]  # as sounddevice hands a callback its blocks
+            outdata = np.empty((len(block), 1), np.float32)
+            t = time.perf_counter()
+            mon.callback(indata, outdata, len(block), None, 0)  # (the user's call: the loudspeaker's block filled too)
+            spent += time.perf_counter() - t
+            a = mon.alert
+            t = time.perf_counter()
+            baseline()
+            base_s += (time.perf_counter() - t) * len(block) / (0.01 * fs)  # the baseline per 10 ms of audio
+            i += len(block)
+            t_end = i / fs
+            while frames and frames[0][0] <= t_end:
+                mon.see(*frames.pop(0)[1:])
+            if a.latency_s is not None:
+                locked_at = t_end if locked_at is None else locked_at
+                k = int(np.searchsorted(walk.arrival, i - 0.02 * fs)) - 1  # the last pulse whose direct sound is in
+                if k >= 0:
+                    lat_err.append(abs(a.latency_s - round_trip[k]))
+            if a.pulse_time_s is not None and a.distance_m is not None and kind in CLOSED:
+                k = int(np.argmin(np.abs(walk.pulse_times_s - a.pulse_time_s)))
+                if abs(a.distance_m - walk.distance_m[k]) < 0.25:
+                    errors.append(abs(a.distance_m - walk.distance_m[k]))
+            if a.level != "clear" and first_alert is None:
+                first_alert = {"distance_m": walk.distance_at(t_end), "level": a.level, "t": t_end}
+            if a.level == "stop" and first_stop is None:
+                first_stop = {"distance_m": walk.distance_at(t_end), "surface": a.surface}
+    except WalkHung:  # the monitor never returned: said, and counted against it
+        return {"first_alert": None, "first_stop": None, "errors": [], "spent_s": spent, "baseline_s": base_s,
+                "lat_err": lat_err, "locked_at": locked_at, "hung": i / fs}
+    finally:
+        signal.alarm(0)
     return {"first_alert": first_alert, "first_stop": first_stop, "errors": errors, "spent_s": spent,
             "baseline_s": base_s, "lat_err": lat_err, "locked_at": locked_at}
 
@@ -512,10 +535,11 @@ def cautioned(r: dict) -> bool:
 
 def outcomes(rs: list[dict]) -> tuple[list, list, list, list]:
     """Walks' results split: those toward surfaces and those cautioned in time; those through
-    doors and past, and those that alerted (false alarms)."""
+    doors and past, and those that alerted or hung (false alarms: a monitor that stops answering
+    fails its wearer there too)."""
     closed = [r for r in rs if r["kind"] in CLOSED]
     passing = [r for r in rs if r["kind"] not in CLOSED]
-    return closed, [r for r in closed if cautioned(r)], passing, [r for r in passing if r["first_alert"]]
+    return closed, [r for r in closed if cautioned(r)], passing, [r for r in passing if r["first_alert"] or r.get("hung")]
 
 
 def table(rows_out: list[dict], rows: tuple) -> list[str]:
@@ -551,6 +575,9 @@ def failures(rows_out: list[dict]) -> list[str]:
     for r in rows_out:
         if "skipped" in r:
             out.append(f"  skipped: {r['row']}, room {r['room']} {r['kind']}: {r['skipped']}")
+        elif r.get("hung") is not None:
+            out.append(f"  hung: {r['row']}, room {r['room']} {r['kind']} {r['speed']:.1f} m/s, latency "
+                       f"{r['latency_s'] * 1e3:.0f} ms: the callback did not return, {r['hung']:.2f} s into the walk")
         elif r["kind"] in CLOSED and not cautioned(r):
             said = f"alert at {r['first_alert']['distance_m']:.2f} m" if r["first_alert"] else "no alert"
             noise = f", {r['ambient']} {r['ambient_db']:.0f} dB down" if r.get("ambient") else ""
@@ -616,7 +643,8 @@ def main() -> None:
                 room = k % args.rooms
                 results.append({"room": room, "row": "held out" if k >= args.rooms else "all", "kind": "room",
                                 "skipped": f"{type(e).__name__}: {e}"})
-    print(f"\n{args.rooms} rooms (seed {args.seed}), {len(results)} walks; {platform.node()} "
+    hung = sum(r.get("hung") is not None for r in results)
+    print(f"\n{args.rooms} rooms (seed {args.seed}), {len(results)} walks ({hung} hung); {platform.node()} "
           f"{time.strftime('%Y-%m-%d')}, {time.time() - started:.0f} s, {args.jobs} processes")
     print("\n".join(table(results, rows + (HELD_OUT if args.held_out else ()))))
     fails = failures(results)
