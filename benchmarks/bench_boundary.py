@@ -54,8 +54,9 @@ The headset's camera (``vrecho.sim.walks.headset_frames``) shows the monitor a f
 Reports, per row: caution raised before 0.5 m on walks toward glass, mirrors and walls (the true
 distance when the alert came); false alarms (any caution or stop) on walks through doors and
 past (a walk whose callback does not return within a minute and five times the walk's length
-is stopped and said, "hung": a miss toward a surface, a false alarm through a door); the distance error median and 90th percentile (the reported distance against the truth
-at the pulse that measured it, on closed walks); the round trip's error once locked, and how
+is stopped and said, "hung": a miss toward a surface, a false alarm through a door); the
+distance error median and 90th percentile (the reported distance against the truth at the pulse
+that measured it, on closed walks); the round trip's error once locked, and how
 long the lock took; the surface named at the first stop; the processing time per 10 ms of
 audio against a baseline timed beside every block (one 1024-point FFT matched filter of a 10 ms
 block), at default thread settings: the time of ``monitor.callback`` as sounddevice calls it
@@ -539,7 +540,7 @@ def outcomes(rs: list[dict]) -> tuple[list, list, list, list]:
     fails its wearer there too)."""
     closed = [r for r in rs if r["kind"] in CLOSED]
     passing = [r for r in rs if r["kind"] not in CLOSED]
-    return closed, [r for r in closed if cautioned(r)], passing, [r for r in passing if r["first_alert"] or r.get("hung")]
+    return closed, [r for r in closed if cautioned(r)], passing, [r for r in passing if r["first_alert"] or r.get("hung") is not None]
 
 
 def table(rows_out: list[dict], rows: tuple) -> list[str]:
