@@ -56,8 +56,8 @@ distance when the alert came); false alarms (any caution or stop) on walks throu
 past (a walk whose callback does not return within a minute and five times the walk's length
 is stopped and said, "hung": a miss toward a surface, a false alarm through a door); the
 distance error median and 90th percentile (the reported distance against the truth at the pulse
-that measured it, on closed walks); the round trip's error once locked, and how
-long the lock took; the surface named at the first stop; the processing time per 10 ms of
+that measured it, on closed walks); the round trip's error once locked, and how long the lock
+took; the surface named at the first stop; the processing time per 10 ms of
 audio against a baseline timed beside every block (one 1024-point FFT matched filter of a 10 ms
 block), at default thread settings: the time of ``monitor.callback`` as sounddevice calls it
 (float32 blocks of one channel in and out, the loudspeaker's block filled); and how loud the
@@ -534,13 +534,18 @@ def cautioned(r: dict) -> bool:
     return bool(r["first_alert"]) and r["first_alert"]["distance_m"] >= 0.5
 
 
+def hung(r: dict) -> bool:
+    """Whether the walk's callback never returned (:func:`run_walk` stopped it; 0.0 s counts too)."""
+    return r.get("hung") is not None
+
+
 def outcomes(rs: list[dict]) -> tuple[list, list, list, list]:
     """Walks' results split: those toward surfaces and those cautioned in time; those through
     doors and past, and those that alerted or hung (false alarms: a monitor that stops answering
     fails its wearer there too)."""
     closed = [r for r in rs if r["kind"] in CLOSED]
     passing = [r for r in rs if r["kind"] not in CLOSED]
-    return closed, [r for r in closed if cautioned(r)], passing, [r for r in passing if r["first_alert"] or r.get("hung") is not None]
+    return closed, [r for r in closed if cautioned(r)], passing, [r for r in passing if r["first_alert"] or hung(r)]
 
 
 def table(rows_out: list[dict], rows: tuple) -> list[str]:
@@ -576,7 +581,7 @@ def failures(rows_out: list[dict]) -> list[str]:
     for r in rows_out:
         if "skipped" in r:
             out.append(f"  skipped: {r['row']}, room {r['room']} {r['kind']}: {r['skipped']}")
-        elif r.get("hung") is not None:
+        elif hung(r):
             out.append(f"  hung: {r['row']}, room {r['room']} {r['kind']} {r['speed']:.1f} m/s, latency "
                        f"{r['latency_s'] * 1e3:.0f} ms: the callback did not return, {r['hung']:.2f} s into the walk")
         elif r["kind"] in CLOSED and not cautioned(r):
@@ -644,9 +649,8 @@ def main() -> None:
                 room = k % args.rooms
                 results.append({"room": room, "row": "held out" if k >= args.rooms else "all", "kind": "room",
                                 "skipped": f"{type(e).__name__}: {e}"})
-    hung = sum(r.get("hung") is not None for r in results)
-    print(f"\n{args.rooms} rooms (seed {args.seed}), {len(results)} walks ({hung} hung); {platform.node()} "
-          f"{time.strftime('%Y-%m-%d')}, {time.time() - started:.0f} s, {args.jobs} processes")
+    print(f"\n{args.rooms} rooms (seed {args.seed}), {len(results)} walks ({sum(map(hung, results))} hung); "
+          f"{platform.node()} {time.strftime('%Y-%m-%d')}, {time.time() - started:.0f} s, {args.jobs} processes")
     print("\n".join(table(results, rows + (HELD_OUT if args.held_out else ()))))
     fails = failures(results)
     if fails:
