@@ -3,13 +3,15 @@ its direct sound's arrival in the microphone's.
 
 The monitor's own direct sound is the strongest arrival that follows the dithered emissions at
 one fixed delay; the delay at which the last three pulses all have a strong arrival (the earliest
-such, the direct sound before its echoes) is the round trip. Once locked, each pulse's direct
-sound is looked for near it: small changes (clock drift) are followed, a jump seen in two pulses
-running is a step (an underrun). A pulse whose direct sound is not where it is due has its
-arrivals within 60 ms looked at: the same jump in two such pulses is a step of whole blocks,
-taken at once (some 80 ms after it). Two pulses without it and without any such arrival (four
-with), or one after the stream said it lost samples, unlock the monitor, which then searches
-again (three pulses and the round trip itself: slower).
+such, the direct sound before its echoes) is the round trip, once no delay heard after only two
+pulses so far stands twice as strong (the direct sound, whose probe's sidelobes would otherwise
+be locked on a block before it). Once locked, each pulse's direct sound is looked for near it:
+small changes (clock drift) are followed, a jump seen in two pulses running is a step (an
+underrun). A pulse whose direct sound is not where it is due has its arrivals within 60 ms
+looked at: the same jump in two such pulses is a step of whole blocks, taken at once (some 80 ms
+after it). Two pulses without it and without any such arrival (four with), or one after the
+stream said it lost samples, unlock the monitor, which then searches again (three pulses and the
+round trip itself: slower).
 """
 
 from __future__ import annotations
@@ -160,8 +162,15 @@ class RoundTrip:
         for i in range(1, n_pulses + 1):
             score = np.minimum(score, coarse[np.clip(avail - i, 0, None), cols])
         testable = avail >= n_pulses
+        # A delay whose third pulse has not arrived yet, far stronger in the two that have than any
+        # testable one: the direct sound, a block from testable. Waited for (the probe's sidelobes,
+        # a third of its peak for some 150 samples either side, are testable a block sooner: a
+        # delay that put the next pulses' windows in the direct sounds' sidelobes was locked on).
+        coming = float(np.where(avail == n_pulses - 1, score, 0.0).max())
         score[~testable] = 0.0
         top = float(score.max())
+        if coming > 2.0 * top:
+            return False
         # The direct sound stands far above the stream's envelope at the delays that can be told.
         sample = rows[:, ::7]  # (every 7th cell: the median at a fraction of the cost)
         sample = sample[sample > 0]
@@ -181,6 +190,12 @@ class RoundTrip:
             levels.append(float(seg[p]))
         if max(delays) - min(delays) > 2.0 or max(levels) > 4.0 * min(levels):
             return False
+        if len(sch.probes) > 1:  # each pulse's own code, where its arrival is put, twice any other's
+            for i in range(1, n_pulses + 1):  # (another pulse's direct sound, its dithers by chance
+                k, at = ks[avail[j] - i], int(starts[avail[j] - i] + delays[i - 1])  # alike, plays the
+                heard = [float(env.scan(at - 4, at + 5, c)[1].max(initial=0.0)) for c in range(len(sch.probes))]
+                if heard[sch.code(k)] < 2.0 * max(h for c, h in enumerate(heard) if c != sch.code(k)):
+                    return False  # other code half the time: seed 34000's room 6 locked two pulses off)
         self.delay, self.level, self.rate = float(np.median(delays)), float(np.median(levels)), 0.0
         self._forget_misses()
         return True
