@@ -190,12 +190,14 @@ class RoundTrip:
             levels.append(float(seg[p]))
         if max(delays) - min(delays) > 2.0 or max(levels) > 4.0 * min(levels):
             return False
-        if len(sch.probes) > 1:  # each pulse's own code, where its arrival is put, twice any other's
-            for i in range(1, n_pulses + 1):  # (another pulse's direct sound, its dithers by chance
-                k, at = ks[avail[j] - i], int(starts[avail[j] - i] + delays[i - 1])  # alike, plays the
-                heard = [float(env.scan(at - 4, at + 5, c)[1].max(initial=0.0)) for c in range(len(sch.probes))]
-                if heard[sch.code(k)] < 2.0 * max(h for c, h in enumerate(heard) if c != sch.code(k)):
-                    return False  # other code half the time: seed 34000's room 6 locked two pulses off)
+        # Each pulse's own code, where its arrival is put, twice any other's: another pulse's direct
+        # sound, its dithers by chance alike, plays the other code half the time (seed 34000's room 6
+        # locked two pulses off by the dithers alone).
+        for i in range(1, n_pulses + 1) if len(sch.probes) > 1 else ():
+            own, at = sch.code(ks[avail[j] - i]), int(starts[avail[j] - i] + delays[i - 1])
+            heard = [float(env.scan(at - 4, at + 5, c)[1].max(initial=0.0)) for c in range(len(sch.probes))]
+            if heard[own] < 2.0 * max(h for c, h in enumerate(heard) if c != own):
+                return False
         self.delay, self.level, self.rate = float(np.median(delays)), float(np.median(levels)), 0.0
         self._forget_misses()
         return True
