@@ -166,6 +166,7 @@ class RoundTrip:
         # testable one: the direct sound, a block from testable. Waited for (the probe's sidelobes,
         # a third of its peak for some 150 samples either side, are testable a block sooner: a
         # delay that put the next pulses' windows in the direct sounds' sidelobes was locked on).
+        # (Such a delay's score above is its two pulses' minimum: np.clip repeats row 0 for the third.)
         coming = float(np.where(avail == n_pulses - 1, score, 0.0).max())
         score[~testable] = 0.0
         top = float(score.max())
