@@ -652,6 +652,7 @@ def test_sparse_or_scattered_tracks_of_other_headsets_pings_raise_no_alert():
 def test_the_line_a_track_is_judged_by_is_theil_sens():
     # Track.straight (compiled): the median absolute residual about the line of the median pairwise
     # slope, as NumPy reckons it, and the newest echo's own; an outlier moves the line not at all.
+    # Track.steady_speed: that slope.
     rng = np.random.default_rng(3)
     for n in (3, 6, 8, 11):
         times = np.sort(rng.uniform(0.0, 0.5, n))
@@ -659,9 +660,11 @@ def test_the_line_a_track_is_judged_by_is_theil_sens():
         tr = _track(times, dists, 0.0)
         t, d = times[-8:], dists[-8:]
         i, j = np.triu_indices(len(t), 1)
-        r = d - np.median((d[j] - d[i]) / (t[j] - t[i])) * t
+        slope = np.median((d[j] - d[i]) / (t[j] - t[i]))
+        r = d - slope * t
         r = np.abs(r - np.median(r))
         assert tr.straight(8) == pytest.approx((np.median(r), r[-1]), abs=1e-12)
+        assert tr.steady_speed(8) == pytest.approx(slope, abs=1e-12)
     line = 2.0 - 1.2 * 0.04 * np.arange(8)
     assert _line_track(2.0, -1.2, 8, 0.0).straight(8) == pytest.approx((0.0, 0.0), abs=1e-9)
     bent = _track(0.04 * np.arange(8), np.r_[line[:-1], line[-1] - 0.2], 0.0).straight(8)
@@ -785,3 +788,20 @@ def _run_stream(x: np.ndarray):
         alerts.append(mon.process(x[i:i + 480]))
         ends.append(i + 480)
     return mon, alerts, ends
+
+
+def test_a_wall_behind_that_took_a_passers_by_echoes_keeps_its_pace():
+    # Seed 5000's room 2 (all at once): the wall behind's track, receding at 1.4 m/s for a second,
+    # took a passer-by's echoes as the two crossed and its filter read 2.6 m/s within 0.15 s. As
+    # the walls behind's pace it put a mirror nearing at 1.5 m/s, 0.7 m off, 0.46 m beside the way,
+    # and the caution waited until 0.18 m. Faster than a wearer walks, a track gives its line's.
+    behind = _line_track(1.0, 1.4, 24, 30.0)
+    for t, d in ((0.96, 1.0 + 1.4 * 0.96 + 0.06), (1.0, 1.0 + 1.4 * 1.0 + 0.14)):  # the passer-by's, ahead of its line
+        behind.update(t, d, 0.02)
+    assert behind.speed > 2.0 and behind.steady_speed() == pytest.approx(1.4, abs=0.02)
+    times = 0.6 + 0.04 * np.arange(12)  # the mirror's echoes: the last 12 pulses, up to 1.04 s
+    mirror = _track(times, 0.7 + 1.5 * (times[-1] - times), 25.0)
+    mon = _monitor()
+    mon._tracks, mon._now = [mirror, behind], int((mirror.times[-1] + 0.02) * FS)
+    mon._judge(None, mirror.times[-1] + 0.04)
+    assert mirror.ahead is None and mon._behind == pytest.approx(1.4, abs=0.02) and mon._level == "caution"

@@ -589,9 +589,8 @@ class BoundaryMonitor:
             if tr.closed_in(0.8) >= self.approach_m:
                 tr.approached_at = t
         # Only a surface being approached can need an alert: the fits are for those.
-        still = self._still = [tr.d_hat for tr in self._tracks
-                               if len(tr.times) >= 10 and tr.speed is not None and abs(tr.speed) < 0.25
-                               and tr.d_hat >= self.miss_m and tr.confirmed]
+        still = self._still = [tr.d_hat for tr in self._tracks if len(tr.times) >= 10 and tr.speed is not None
+                               and abs(tr.speed) < 0.25 and tr.d_hat >= self.miss_m and tr.confirmed]
         for tr in updated:
             was, tr.ahead = tr.ahead, None
             closing = -(tr.speed or 0.0)
@@ -636,15 +635,16 @@ class BoundaryMonitor:
                 if tr is not None and tr.confirmed:  # (a surface, not stray peaks: see _commit)
                     provisional[id(tr)] = d
         self._oldest_approach = self._judge_at = np.inf
-        # The wearer's pace, at least: the fastest any surface heard for a while nears or recedes (the
-        # wall behind recedes as the wall ahead nears; `behind`: receding only). A wall met at 10 degrees: aside.
-        # At most 2 m/s: faster, a track of stray peaks (a voice's pitch glide), not the wearer.
-        heard = [tr.speed for tr in self._tracks if tr.speed is not None and tr.confirmed and len(tr.times) >= 8
+        # The wearer's pace, at least: the fastest any surface heard for a while nears or recedes (the wall behind recedes
+        # as the wall ahead nears; `behind`: receding only). A wall met at 10 degrees: aside. At most 2 m/s: faster, a track
+        # that took other peaks (a pitch glide, a passer-by crossing); for `behind`, its last echoes' line (steady_speed).
+        heard = [tr for tr in self._tracks if tr.speed is not None and tr.confirmed and len(tr.times) >= 8
                  and t_pulse - tr.times[-1] < 0.4]  # (pulse times: the round trip ago)
         forgot, self._paced_at = t_now - self._paced_at, t_now  # (forgotten at 1 m/s a second)
-        self._pace = pace = min(max(max(map(abs, heard), default=0.0), self._pace - forgot), _PACE_MAX_MPS)
-        self._behind = max(max(heard, default=0.0), self._behind - forgot)
-        behind = min(self._behind, _PACE_MAX_MPS)  # (faster: a track that took another surface's echoes)
+        self._pace = pace = min(max(max((abs(tr.speed) for tr in heard), default=0.0), self._pace - forgot), _PACE_MAX_MPS)
+        self._behind = max(max((tr.steady_speed() if tr.speed > _PACE_MAX_MPS else tr.speed for tr in heard),
+                               default=0.0), self._behind - forgot)
+        behind = min(self._behind, _PACE_MAX_MPS)
         for tr in self._tracks:
             if tr.ahead is False or (not tr.ahead and id(tr) not in provisional and (tr.speed or 0.0) > -0.5) \
                     or (self._level == "clear" and (tr.speed or 0.0) > _RECEDING_MPS) or not tr.alerting:

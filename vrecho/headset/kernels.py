@@ -312,9 +312,9 @@ def theil_sen(t, d):  # pragma: no cover (compiled)
 
     Returns
     -------
-    median, newest : float
+    median, newest, slope : float
         The median absolute residual about that line (its offset the residuals' median), in
-        metres, and the last point's own.
+        metres, the last point's own, and the line's slope in m/s.
     """
     n = len(t)
     slopes = np.empty(n * (n - 1) // 2)
@@ -323,9 +323,10 @@ def theil_sen(t, d):  # pragma: no cover (compiled)
         for j in range(i + 1, n):
             slopes[k] = (d[j] - d[i]) / max(t[j] - t[i], 1e-6)
             k += 1
-    r = d - np.median(slopes) * t
+    slope = np.median(slopes)
+    r = d - slope * t
     r = np.abs(r - np.median(r))
-    return np.median(r), r[-1]
+    return np.median(r), r[-1], slope
 
 
 @njit(cache=True, nogil=True)

@@ -299,11 +299,32 @@ class Track:
         -------
         median, newest : float
         """
-        k = min(n, len(self.times))
-        t = np.fromiter(self.times, float, len(self.times))[-k:]
-        d = np.fromiter(self.dists, float, len(self.dists))[-k:]
-        median, newest = theil_sen(t, d)
+        median, newest, _ = self._theil_sen(n)
         return float(median), float(newest)
+
+    def steady_speed(self, n: int = 16) -> float:
+        """The speed the line through the last ``n`` echoes gives: their median pairwise slope
+        (Theil-Sen), in m/s. The filter's speed follows a few echoes of another surface taken as
+        the two cross: a wall behind's track, receding at 1.4 m/s, read 2.6 within 0.15 s,
+        faster than a wearer walks (seed 5000's all at once room 2). The median holds while
+        such echoes are under a quarter of the ``n``; it lags a wearer speeding up.
+
+        Parameters
+        ----------
+        n : int
+            The line goes through that many of the last echoes (default 16; all if fewer).
+
+        Returns
+        -------
+        float
+        """
+        return float(self._theil_sen(n)[2])
+
+    def _theil_sen(self, n: int) -> tuple:
+        """:func:`~.kernels.theil_sen` of the last ``n`` echoes (all there are if fewer)."""
+        k = min(n, len(self.times))
+        return theil_sen(np.fromiter(self.times, float, len(self.times))[-k:],
+                         np.fromiter(self.dists, float, len(self.dists))[-k:])
 
     def ahead_with(self, t: float, d: float, miss_m: float, still: list[float]) -> bool:
         """Whether the surface is in the way with one more echo, the history left as it is.
