@@ -805,3 +805,4 @@ def test_a_wall_behind_that_took_a_passers_by_echoes_keeps_its_pace():
     mon._tracks, mon._now = [mirror, behind], int((mirror.times[-1] + 0.02) * FS)
     mon._judge(None, mirror.times[-1] + 0.04)
     assert mirror.ahead is None and mon._behind == pytest.approx(1.4, abs=0.02) and mon._level == "caution"
+    assert mon._pace == pytest.approx(1.5)  # (the mirror's: the wall behind's line is slower)

@@ -636,14 +636,13 @@ class BoundaryMonitor:
                     provisional[id(tr)] = d
         self._oldest_approach = self._judge_at = np.inf
         # The wearer's pace, at least: the fastest any surface heard for a while nears or recedes (the wall behind recedes
-        # as the wall ahead nears; `behind`: receding only). A wall met at 10 degrees: aside. At most 2 m/s: faster, a track
-        # that took other peaks (a pitch glide, a passer-by crossing); for `behind`, its last echoes' line (steady_speed).
-        heard = [tr for tr in self._tracks if tr.speed is not None and tr.confirmed and len(tr.times) >= 8
-                 and t_pulse - tr.times[-1] < 0.4]  # (pulse times: the round trip ago)
-        forgot, self._paced_at = t_now - self._paced_at, t_now  # (forgotten at 1 m/s a second)
-        self._pace = pace = min(max(max((abs(tr.speed) for tr in heard), default=0.0), self._pace - forgot), _PACE_MAX_MPS)
-        self._behind = max(max((tr.steady_speed() if tr.speed > _PACE_MAX_MPS else tr.speed for tr in heard),
-                               default=0.0), self._behind - forgot)
+        # as the wall ahead nears; `behind`: receding only). A wall met at 10 degrees: aside. At most 2 m/s: a track read
+        # faster took other peaks (a pitch glide, a passer-by crossing), and gives its last echoes' line (steady_speed).
+        heard = [tr.steady_speed() if abs(tr.speed) > _PACE_MAX_MPS else tr.speed for tr in self._tracks
+                 if tr.speed is not None and tr.confirmed and len(tr.times) >= 8 and t_pulse - tr.times[-1] < 0.4]
+        forgot, self._paced_at = t_now - self._paced_at, t_now  # (forgotten at 1 m/s a second; pulse times: round trip ago)
+        self._pace = pace = min(max(max(map(abs, heard), default=0.0), self._pace - forgot), _PACE_MAX_MPS)
+        self._behind = max(max(heard, default=0.0), self._behind - forgot)
         behind = min(self._behind, _PACE_MAX_MPS)
         for tr in self._tracks:
             if tr.ahead is False or (not tr.ahead and id(tr) not in provisional and (tr.speed or 0.0) > -0.5) \
