@@ -559,6 +559,32 @@ def test_a_track_follows_a_wearer_speeding_up():
     assert not any(stray) and tr.confirmed and abs(tr.speed + 2.0) < 0.1
 
 
+def test_a_surface_missed_twice_while_the_wearer_speeds_up_keeps_its_track():
+    # A wall 1.9 m off; the wearer starts walking at 0.4 s, speeding up at 3 m/s^2 to 2 m/s, and
+    # two pulses hear no echo of it meanwhile (a noise burst); stray peaks scatter about two spots
+    # its echo will cross. The prediction lags the pace by some 5 cm after the gap, as the filter's
+    # spread says it may: the gate is that spread's, not the steady walk's, and the track keeps
+    # the wall's echoes from its first to its last. (A fixed 5 cm gate lost them after the gap on 6
+    # of 8 walks, and a new track was confirmed only 0.2 m on: seed 38000's room 16 mirror,
+    # cautioned at 0.30 m.)
+    def dist(t):
+        u = max(t - 0.4, 0.0)
+        return 1.9 - 1.5 * min(u, 2 / 3) ** 2 - 2.0 * max(u - 2 / 3, 0.0)
+
+    for seed in range(8):
+        mon, rng = _monitor(), np.random.default_rng(seed)
+        for k in range(40):
+            t = 0.04 * k + float(rng.uniform(0, 0.005))
+            d = dist(t)
+            echoes = [(2.3 + float(rng.normal(0, 0.001)), 0.02)]
+            if k not in (14, 15):
+                echoes.append((d + float(rng.normal(0, 0.001)), 0.03))
+            echoes += [(c + float(rng.normal(0, 0.008)), 0.015) for c in (1.72, 1.33) if d > c + 0.03]
+            mon._commit(t, sorted(echoes))
+        own = [tr for tr in mon._tracks if abs(tr.d_hat - d) < 0.01]
+        assert len(own) == 1 and own[0].times[0] < 0.01 and own[0].confirmed, (seed, own)
+
+
 def test_a_side_wall_converged_on_through_a_door_is_not_ahead():
     # A door near a corner, walked through at 8 degrees to its normal at 2 m/s: the wall beside
     # it comes within 0.7 m, closing at 0.27 m/s, a seventh of the wearer's pace (the wall

@@ -20,13 +20,13 @@ seed (a faint tick), and:
    echo peaks above the noise floor and the direct sound's sidelobes are timed to a fraction of a
    sample (:class:`~.ranging.EchoFinder`). A surface straight ahead at ``d`` returns the echo path
    ``L = sqrt((2 d)^2 + s^2)`` (``s``: loudspeaker to microphone): ``d`` follows.
-2. **Tracking.** Echo distances are chained over pulses into tracks (the closest pairs of echo
-   and prediction first, within each track's gate: 12 cm while young, then five times its rms
-   residual, at least 4 cm); a track starts from three echoes no track took (or took over half
-   its gate off) in a line over three pulses at a walking pace (:func:`~.tracks.initiate`: where
-   other headsets' pings crowd the range, one echo says nothing of its speed), or from a line of
-   faint echoes summed along each approach over eight pulses (:mod:`.faint`), which also keep a
-   track that missed a pulse's echo; a Kalman filter gives each track's range and closing speed.
+2. **Tracking.** Echo distances are chained over pulses into tracks, Kalman filters of range and
+   closing speed (the closest pairs of echo and prediction first, of the surest tracks, within each
+   track's gate: 12 cm while young, then five times its rms residual, at least 4 cm, or the filter's
+   spread if wider); a track starts from three echoes no track took (or took over half its gate off)
+   in a line over three pulses at a walking pace (:func:`~.tracks.initiate`: where other headsets'
+   pings crowd the range, one echo says nothing of its speed), or from a line of faint echoes summed
+   along each approach over eight pulses (:mod:`.faint`), which also keep a track that missed one.
 3. **Alerts with hysteresis.** Only surfaces the wearer moves toward count (``approach_m``
    nearer within 0.8 s, in the last second) and will not pass by: a point at lateral offset
    ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, so a quadratic fit over the last 0.3 to 0.6 s

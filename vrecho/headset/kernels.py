@@ -32,7 +32,7 @@ def compile_kernels() -> None:
     echo_peaks(np.ones(16, np.float32), 2, 3.5, 1.0, np.zeros(16), np.ones(2), 0.0, 0.007, 0.07, 0.0, 0.12, 4.0)
     closest_approach(np.arange(10.0), np.ones(10), np.array([0.6, 0.45]), 0.4)
     passing(np.arange(10.0), np.ones(10), np.array([0.5]), 0.6)
-    pair(np.ones(2), np.ones(2), np.ones(1), np.ones(1), 1.0, 0.01)
+    pair(np.ones(2), np.ones(2), np.ones(1), np.ones(1), np.zeros(1), 1.0, 0.01)
     echo_path(1.0, 0.07, 0.0)  # (scalars, as the monitor calls it too)
     lines(np.ones(1), np.ones(1), np.ones(1), 0.5, -0.1, 0.1, 0.006)
     theil_sen(np.arange(3.0), np.ones(3))
@@ -514,10 +514,10 @@ def amplitude_llr(strength, clutter_strength):  # pragma: no cover (compiled)
 
 
 @njit(cache=True, nogil=True)
-def pair(d, strength, predicted, gates, mean, sigma_m):  # pragma: no cover (compiled)
+def pair(d, strength, predicted, gates, scores, mean, sigma_m):  # pragma: no cover (compiled)
     """:func:`~vrecho.headset.tracks.associate`'s pairing: the likeliest pairs of echo and track
     within the tracks' gates first (the score's terms, :meth:`~vrecho.headset.tracks.Track.update`:
-    nearness to the prediction, strength against the pulse's mean).
+    nearness to the prediction, strength against the pulse's mean; and the track's own doubt).
 
     Parameters
     ----------
@@ -525,6 +525,11 @@ def pair(d, strength, predicted, gates, mean, sigma_m):  # pragma: no cover (com
         The echoes' distances (metres) and strengths.
     predicted, gates : numpy.ndarray [shape=(k,)]
         The tracks' predicted distances and gates, metres.
+    scores : numpy.ndarray [shape=(k,)]
+        The tracks' scores (:attr:`~vrecho.headset.tracks.Track.score`), the log odds that each is
+        a surface's: a pair's cost adds the track's doubt, -log P(surface) = log(1 + exp(-score)),
+        some 0 for a confirmed track and about minus its score for one its echoes speak against (a
+        young track of stray peaks whose prediction a surface's echo crosses yields it).
     mean : float
         The pulse's peaks' mean strength (0: not weighed).
     sigma_m : float
@@ -536,6 +541,7 @@ def pair(d, strength, predicted, gates, mean, sigma_m):  # pragma: no cover (com
         For each echo, the track it joins (-1: none).
     """
     js, iis, costs = [], [], []
+    doubt = np.log1p(np.exp(-scores))
     for j in range(len(d)):
         llr = amplitude_llr(strength[j], mean) if mean > 0.0 else 0.0
         for i in range(len(predicted)):
@@ -543,7 +549,7 @@ def pair(d, strength, predicted, gates, mean, sigma_m):  # pragma: no cover (com
             if gap < gates[i]:
                 js.append(j)
                 iis.append(i)
-                costs.append(0.5 * (gap / sigma_m) ** 2 - llr)
+                costs.append(0.5 * (gap / sigma_m) ** 2 - llr + doubt[i])
     track_of = np.full(len(d), -1, np.int64)
     taken = np.zeros(len(predicted), np.bool_)
     for k in np.argsort(np.array(costs), kind="mergesort"):

@@ -103,7 +103,8 @@ class Track:
         How far from its prediction an echo may lie and still be this surface's, in metres:
         12 cm while the track is young (its speed not yet known), then five times its rms
         residual, at least 4 cm (so another headset's pings, which land elsewhere every pulse,
-        seldom fall in it).
+        seldom fall in it); :func:`associate` widens it to the filter's spread where that is
+        wider.
     score : float
         The evidence that the echoes are one surface's and not stray peaks that happened near the
         prediction: the log-likelihood ratio summed over pulses (:meth:`update`, :meth:`missed`);
@@ -144,6 +145,38 @@ class Track:
             ``d_hat`` moved on at ``speed`` (0 while unknown) from the last echo, in metres.
         """
         return self.d_hat + (self.speed or 0.0) * (t - self.times[-1])
+
+    def _predicted_cov(self, dt: float) -> tuple:
+        """The filter's covariance of distance and speed ``dt`` seconds after the last echo: the
+        wearer's pace may change meanwhile (white acceleration, :data:`_ACCEL`)."""
+        pdd, pdv, pvv = self.cov
+        q = _ACCEL * _ACCEL * dt * dt
+        return pdd + dt * (2 * pdv + dt * pvv) + q * dt * dt / 4, pdv + dt * pvv + q * dt / 2, pvv + q
+
+    def spread(self, t: float) -> float:
+        """How far a surface's echo may stray from :meth:`predict`, as the filter has it.
+
+        Parameters
+        ----------
+        t : float
+            The time in seconds, on the stream's clock, after the last echo.
+
+        Returns
+        -------
+        float
+            The variance in square metres: the echo's own (:data:`_SIGMA_M` squared) and the
+            prediction's, which grows with the time since the last echo (the wearer's pace may
+            change at up to :data:`_ACCEL`).
+
+        Examples
+        --------
+        >>> tr = Track()
+        >>> for t, d in ((0.0, 2.0), (0.04, 1.96), (0.08, 1.92)):
+        ...     tr.update(t, d, 0.02)
+        >>> bool(tr.spread(0.12) < tr.spread(0.20))
+        True
+        """
+        return self._predicted_cov(max(t - self.times[-1], 1e-3))[0] + _VAR_M
 
     @property
     def stray(self) -> bool:
@@ -220,10 +253,7 @@ class Track:
                 self.cov = (_VAR_M, _VAR_M / dt, 2 * _VAR_M / (dt * dt))
                 self.score -= _LOG_YOUNG_GATE + log_clutter  # anywhere within the young gate
             else:
-                pdd, pdv, pvv = self.cov  # predicted: the wearer's pace may change (white acceleration)
-                q = _ACCEL * _ACCEL * dt * dt
-                pdd, pdv, pvv = (pdd + dt * (2 * pdv + dt * pvv) + q * dt * dt / 4,
-                                 pdv + dt * pvv + q * dt / 2, pvv + q)
+                pdd, pdv, pvv = self._predicted_cov(dt)
                 s = pdd + _VAR_M  # the echo's spread about the prediction
                 predicted = self.d_hat + self.speed * dt
                 r = d - predicted
@@ -453,10 +483,14 @@ def initiate(pulses, *, tolerance_m: float = 0.006, approach_mps: float = 2.6, r
 
 
 def associate(tracks: list, t: float, echoes) -> list[tuple[Track | None, float, float]]:
-    """Each echo with a track whose prediction lies within its gate (:attr:`Track.gate_m`), or
-    None (a new surface): the likeliest pairs first (nearest the prediction and, among many
-    peaks, standing out: :func:`amplitude_llr`), so a stray peak beside a surface's echo
-    (another headset's ping) seldom takes its track. Of the echoes left, those within 3 cm of
+    """Each echo with a track whose prediction lies within its gate, or None (a new surface): the
+    likeliest pairs first (nearest the prediction, among many peaks standing out,
+    :func:`amplitude_llr`, and of a track whose echoes speak for it, :func:`pair`), so a stray
+    peak beside a surface's echo (another headset's ping) seldom takes its track, nor a young
+    track of stray peaks a surface's echo crossing it. The gate is :attr:`Track.gate_m`, or 2.5
+    standard deviations of the filter's spread where that is wider (:meth:`Track.spread`: after
+    missed pulses while the wearer speeds up, the prediction lags by more than the echoes'
+    scatter set). Of the echoes left, those within 3 cm of
     another are one surface (the strongest kept), and none is kept within 3 cm of a track's echo.
 
     Parameters
@@ -478,9 +512,10 @@ def associate(tracks: list, t: float, echoes) -> list[tuple[Track | None, float,
     track_of: dict[int, int] = {}
     if tracks and echoes:
         predicted = np.array([tr.d_hat + (tr.speed or 0.0) * (t - tr.times[-1]) for tr in tracks])
-        gates = np.array([tr.gate_m for tr in tracks])
+        gates = np.maximum([tr.gate_m for tr in tracks], [2.5 * tr.spread(t) ** 0.5 for tr in tracks])
+        scores = np.array([tr.score for tr in tracks])
         d, strength = np.array(echoes).T.copy()  # (contiguous, as the compiled kernel was made for)
-        for j, i in enumerate(pair(d, strength, predicted, gates, clutter_strength(echoes), _SIGMA_M).tolist()):
+        for j, i in enumerate(pair(d, strength, predicted, gates, scores, clutter_strength(echoes), _SIGMA_M).tolist()):
             if i >= 0:
                 track_of[j] = i
     out = [(tracks[i], echoes[j][0], echoes[j][1]) for j, i in track_of.items()]
