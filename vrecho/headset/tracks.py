@@ -27,6 +27,8 @@ _LOG_MISS = math.log(0.4)
 _LOG_QUARTER = math.log(0.25)
 _LOG_YOUNG_GATE = math.log(2 * 0.12)
 _FLOOR, _CEILING = -10.0, 30.0  # the score's bounds: the last half second of echoes tells
+_SPAN_MPS = 1.0  # the closest-approach fits' spans stretched for a track nearing slower (Track.in_the_way)
+_SPAN_MAX = 2.0  # ... up to so many times
 _LINE_PEAKS = 5  # a line of faint echoes starts a track with five peaks of its own (attach_faint)
 CONFIRMED = math.log(100.0)
 """A track's :attr:`~Track.score` from which its echoes count as a surface's."""
@@ -408,12 +410,22 @@ class Track:
         history where the two crossed); a span the track does not reach 0.9 of, or with fewer
         than 8 echoes, or whose fit is not nearing at a steady pace, does not tell.
 
+        What tells a point aside from a surface ahead is the curvature of its echoes' line over the
+        way walked, not over the time taken: passed ``a`` off at distance ``D``, its line bends by
+        some a^2 L^2 / (8 D^3) over ``L`` metres walked. A track nearing slower than
+        :data:`_SPAN_MPS` has its spans stretched by :data:`_SPAN_MPS` / speed (up to
+        :data:`_SPAN_MAX` times): at 0.55 m/s, 0.6 s is 0.33 m walked, over which a point passed
+        0.4 m off at a metre bends its line by some 2 mm, about as much as its echoes scatter (seed
+        39000's slow walks: a wall straight ahead read as passed by at 0.97 m, in the way at
+        0.6 m).
+
         Parameters
         ----------
         miss_m : float
             The closest approach in metres beyond which the surface is not in the way.
         spans_s : tuple of float
-            The stretches of history fitted, in seconds (default 0.6, 0.45 and 0.32).
+            The stretches of history fitted, in seconds (default 0.6, 0.45 and 0.32), before the
+            stretch for a slow track.
         extra : tuple of float, optional
             One more point (t, d), seconds and metres, after the history.
 
@@ -428,7 +440,8 @@ class Track:
         times, dists = self._history(extra)
         t = np.fromiter(times, float, len(times))
         d = np.fromiter(dists, float, len(dists))
-        way = closest_approach(t, d, np.asarray(spans_s, float), float(miss_m))
+        stretch = min(max(_SPAN_MPS / abs(self.speed), 1.0), _SPAN_MAX) if self.speed else 1.0
+        way = closest_approach(t, d, np.asarray(spans_s, float) * stretch, float(miss_m))
         return None if way < 0 else bool(way)
 
 
