@@ -30,12 +30,12 @@ seed (a faint tick), and:
 3. **Alerts with hysteresis.** Only surfaces the wearer moves toward count (``approach_m``
    nearer within 0.8 s, in the last second) and will not pass by: a point at lateral offset
    ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, so a quadratic fit over the last 0.3 to 0.6 s
-   (to 1.2 s under 1 m/s: the curvature is over the way walked) gives a^2, the closest point of
-   approach; a surface is in the way when a^2 lies within +/- ``miss_m``^2 by two standard
-   errors (a surface straight ahead has a = 0; the wall above a
-   door, heard by way of the ceiling, or a wall beside it by way of a side wall, nears too but
-   passes by, and a track whose fit is poor waits). This is what tells the wall ahead from the
-   floor, the ceiling and walls alongside, which one microphone cannot tell by direction.
+   (to 1.2 s for a track nearing under 1 m/s: the curvature is over the way walked) gives a^2,
+   the closest point of approach; a surface is in the way when a^2 lies within +/- ``miss_m``^2
+   by two standard errors (a surface straight ahead has a = 0; the wall above a door, heard by way
+   of the ceiling, or a wall beside it by way of a side wall, nears too but passes by, and a track
+   whose fit is poor waits). This is what tells the wall ahead from the floor, the ceiling and
+   walls alongside, which one microphone cannot tell by direction.
    The echo is as old as the round trip: the level reckons where the wearer may be by now (the
    pulse may have left as soon as it was written). *caution* when time to contact is under
    ``caution_ttc_s`` or distance under ``caution_m``, *stop* under ``stop_m``; an alert ends only
