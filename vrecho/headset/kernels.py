@@ -32,7 +32,7 @@ def compile_kernels() -> None:
     echo_peaks(np.ones(16, np.float32), 2, 3.5, 1.0, np.zeros(16), np.ones(2), 0.0, 0.007, 0.07, 0.0, 0.12, 4.0)
     closest_approach(np.arange(10.0), np.ones(10), np.array([0.6, 0.45]), 0.4)
     passing(np.arange(10.0), np.ones(10), np.array([0.5]), 0.6)
-    pair(np.ones(2), np.ones(2), np.ones(1), np.ones(1), np.zeros(1), 1.0, 0.01)
+    pair(np.ones(2), np.ones(2), np.ones((1, 8)), 1.0, 1.0, 0.01, 3.0)
     echo_path(1.0, 0.07, 0.0)  # (scalars, as the monitor calls it too)
     lines(np.ones(1), np.ones(1), np.ones(1), 0.5, -0.1, 0.1, 0.006)
     theil_sen(np.arange(3.0), np.ones(3))
@@ -514,49 +514,80 @@ def amplitude_llr(strength, clutter_strength):  # pragma: no cover (compiled)
 
 
 @njit(cache=True, nogil=True)
-def pair(d, strength, predicted, gates, scores, mean, sigma_m):  # pragma: no cover (compiled)
+def pair(d, strength, state, t, mean, sigma_m, accel):  # pragma: no cover (compiled)
     """:func:`~vrecho.headset.tracks.associate`'s pairing: the likeliest pairs of echo and track
     within the tracks' gates first (the score's terms, :meth:`~vrecho.headset.tracks.Track.update`:
-    nearness to the prediction, strength against the pulse's mean; and the track's own doubt).
+    nearness to the prediction, strength against the pulse's mean; and the track's own doubt);
+    then, of the echoes left (sorted by distance), those within 3 cm of another are one surface
+    (the strongest kept), and none is kept within 3 cm of a track's echo.
 
     Parameters
     ----------
     d, strength : numpy.ndarray [shape=(n,)]
-        The echoes' distances (metres) and strengths.
-    predicted, gates : numpy.ndarray [shape=(k,)]
-        The tracks' predicted distances and gates, metres.
-    scores : numpy.ndarray [shape=(k,)]
-        The tracks' scores (:attr:`~vrecho.headset.tracks.Track.score`), the log odds that each is
-        a surface's: a pair's cost adds the track's doubt, -log P(surface) = log(1 + exp(-score)),
-        some 0 for a confirmed track and about minus its score for one its echoes speak against (a
-        young track of stray peaks whose prediction a surface's echo crosses yields it).
+        The echoes' distances (metres, ascending) and strengths.
+    state : numpy.ndarray [shape=(k, 8)]
+        Each track's filtered distance (metres), speed (m/s, 0 while unknown), last echo's time
+        (seconds), filter covariance (dd, dv, vv), gate (metres) and score
+        (:attr:`~vrecho.headset.tracks.Track.score`, the log odds that it is a surface's: a
+        pair's cost adds the track's doubt, -log P(surface) = log(1 + exp(-score)), some 0 for a
+        confirmed track and about minus its score for one its echoes speak against (a young
+        track of stray peaks whose prediction a surface's echo crosses yields it)). Its gate is
+        widened to 2.5 standard deviations of the filter's spread at ``t``
+        (:meth:`~vrecho.headset.tracks.Track.spread`) where that is wider.
+    t : float
+        The echoes' pulse's emission, seconds.
     mean : float
         The pulse's peaks' mean strength (0: not weighed).
     sigma_m : float
         How far a surface's echo strays from its prediction, metres.
+    accel : float
+        The filter's white acceleration, m/s^2.
 
     Returns
     -------
     numpy.ndarray [shape=(n,), dtype=int64]
-        For each echo, the track it joins (-1: none).
+        For each echo, the track it joins, or -1 (a new surface's, kept), or -2 (left out).
     """
+    k = state.shape[0]
+    predicted = np.empty(k)
+    gates = np.empty(k)
+    doubt = np.empty(k)
+    for i in range(k):
+        since = t - state[i, 2]
+        predicted[i] = state[i, 0] + state[i, 1] * since
+        dt = since if since > 1e-3 else 1e-3
+        q = accel * accel * dt * dt
+        spread = state[i, 3] + dt * (2 * state[i, 4] + dt * state[i, 5]) + q * dt * dt / 4 + sigma_m * sigma_m
+        gates[i] = max(state[i, 6], 2.5 * spread ** 0.5)
+        doubt[i] = np.log1p(np.exp(-state[i, 7]))
     js, iis, costs = [], [], []
-    doubt = np.log1p(np.exp(-scores))
     for j in range(len(d)):
         llr = amplitude_llr(strength[j], mean) if mean > 0.0 else 0.0
-        for i in range(len(predicted)):
+        for i in range(k):
             gap = abs(d[j] - predicted[i])
             if gap < gates[i]:
                 js.append(j)
                 iis.append(i)
                 costs.append(0.5 * (gap / sigma_m) ** 2 - llr + doubt[i])
     track_of = np.full(len(d), -1, np.int64)
-    taken = np.zeros(len(predicted), np.bool_)
-    for k in np.argsort(np.array(costs), kind="mergesort"):
-        j, i = js[k], iis[k]
+    taken = np.zeros(k, np.bool_)
+    for c in np.argsort(np.array(costs), kind="mergesort"):
+        j, i = js[c], iis[c]
         if track_of[j] < 0 and not taken[i]:
             track_of[j] = i
             taken[i] = True
+    claimed = np.sort(d[track_of >= 0])
+    last = -1  # the last echo kept as a new surface's
+    for j in range(len(d)):
+        if track_of[j] >= 0:
+            continue
+        track_of[j] = -2
+        c = np.searchsorted(claimed, d[j])
+        if (c < len(claimed) and claimed[c] - d[j] < 0.03) or (c > 0 and d[j] - claimed[c - 1] < 0.03):
+            continue
+        if last >= 0 and d[j] - d[last] < 0.03:
+            if strength[j] > strength[last]:
+                track_of[last], track_of[j], last = -2, -1, j
+            continue
+        track_of[j], last = -1, j
     return track_of
-
-

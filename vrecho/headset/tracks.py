@@ -113,6 +113,9 @@ class Track:
         :attr:`confirmed` above :data:`CONFIRMED`.
     cov : tuple of float
         The filter's covariance of distance and speed at the last echo: (m^2, m^2/s, m^2/s^2).
+    closed_m : float
+        :meth:`closed_in` over 0.8 s at the last echo, in metres, as the monitor keeps it (0
+        until then).
     """
 
     times: deque = field(default_factory=lambda: deque(maxlen=64))
@@ -127,6 +130,7 @@ class Track:
     gate_m: float = 0.12  # how far from its prediction an echo may lie and be this surface's
     score: float = 0.0  # log-likelihood ratio, a surface against stray peaks (see update)
     cov: tuple = (0.0, 0.0, 0.0)  # the filter's covariance of (distance, speed): dd, dv, vv
+    closed_m: float = 0.0  # closed_in(0.8) at the last echo (the monitor's)
 
     @property
     def surface(self) -> str:
@@ -168,7 +172,8 @@ class Track:
         float
             The variance in square metres: the echo's own (:data:`_SIGMA_M` squared) and the
             prediction's, which grows with the time since the last echo (the wearer's pace may
-            change at up to :data:`_ACCEL`).
+            change at up to :data:`_ACCEL`). (:func:`~.kernels.pair` widens the gates by the same,
+            compiled, for every track at once.)
 
         Examples
         --------
@@ -521,31 +526,14 @@ def associate(tracks: list, t: float, echoes) -> list[tuple[Track | None, float,
     list of (Track or None, float, float)
         The track (None: a new surface), distance and strength of each echo kept.
     """
+    if not echoes:
+        return []
     echoes = sorted(echoes)
-    track_of: dict[int, int] = {}
-    if tracks and echoes:
-        predicted = np.array([tr.d_hat + (tr.speed or 0.0) * (t - tr.times[-1]) for tr in tracks])
-        gates = np.maximum([tr.gate_m for tr in tracks], [2.5 * tr.spread(t) ** 0.5 for tr in tracks])
-        scores = np.array([tr.score for tr in tracks])
-        d, strength = np.array(echoes).T.copy()  # (contiguous, as the compiled kernel was made for)
-        for j, i in enumerate(pair(d, strength, predicted, gates, scores, clutter_strength(echoes), _SIGMA_M).tolist()):
-            if i >= 0:
-                track_of[j] = i
-    out = [(tracks[i], echoes[j][0], echoes[j][1]) for j, i in track_of.items()]
-    claimed = sorted(d for _, d, _ in out)
-    new = []
-    for j, (d, strength) in enumerate(echoes):
-        if j in track_of:
-            continue
-        c = bisect.bisect_left(claimed, d)
-        if (c < len(claimed) and claimed[c] - d < 0.03) or (c > 0 and d - claimed[c - 1] < 0.03):
-            continue
-        if new and d - new[-1][1] < 0.03:
-            if strength > new[-1][2]:
-                new[-1] = (None, d, strength)
-            continue
-        new.append((None, d, strength))
-    return out + new
+    state = np.array([(tr.d_hat, tr.speed or 0.0, tr.times[-1], *tr.cov, tr.gate_m, tr.score) for tr in tracks],
+                     float).reshape(-1, 8)
+    d, strength = np.array(echoes).T.copy()  # (contiguous, as the compiled kernel was made for)
+    to = pair(d, strength, state, t, clutter_strength(echoes), _SIGMA_M, _ACCEL).tolist()
+    return [(tracks[i], *e) for e, i in zip(echoes, to) if i >= 0] + [(None, *e) for e, i in zip(echoes, to) if i == -1]
 
 
 def attach_faint(tracks: list, t: float, faint, lines, clutter_per_m: float, clutter_strength: float,
