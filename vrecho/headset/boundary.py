@@ -80,7 +80,7 @@ from .kernels import compile_kernels, echo_path, take
 from .ranging import GUARD, Envelope, ProbeSchedule, channel0, clipped, pcm_scale, probe_codes, zero_runs
 from .roundtrip import RoundTrip
 from .faint import FaintEchoes
-from .tracks import Track, associate, attach_faint, clutter_strength, initiate
+from .tracks import Track, associate, attach_faint, clutter_strength, crowding, initiate
 from .view import look_all
 
 
@@ -568,12 +568,12 @@ class BoundaryMonitor:
         updated = []
         clutter = len(echoes) / (self.max_range_m - self.min_range_m)  # peaks per metre in this pulse
         mean_strength = clutter_strength(echoes)
-        fresh = []
+        fresh, near = [], sorted(d for d, _ in echoes)
         for tr, d, strength in associate(self._tracks, t, echoes):
             if tr is None or abs(d - tr.predict(t)) > 0.5 * tr.gate_m:  # (taken far off its track's line: may
                 fresh.append((d, strength))  # be another surface's, whose range the track crossed, and start its own)
             if tr is not None:
-                tr.update(t, d, strength, clutter_per_m=clutter, clutter_strength=mean_strength)
+                tr.update(t, d, strength, clutter_per_m=crowding(near, d, clutter), clutter_strength=mean_strength)
                 updated.append(tr)
         fresh.sort()
         seeded, lifted = attach_faint(self._tracks, t, faint, lines, clutter, mean_strength, fresh)
