@@ -14,6 +14,7 @@ import pytest
 import torch
 
 from conftest import run_cli
+from vrecho.learn.cluster import latest_checkpoint
 
 
 def _same_arrays(a, b) -> None:
@@ -69,6 +70,19 @@ def test_ray_generation_resumed_after_ctrl_c_is_the_local_run_bit_for_bit(tiny_d
     _same_arrays(out, tiny_dataset)
 
 
+def test_a_checkpoint_cut_short_is_passed_over(tmp_path):
+    """A run interrupted while Ray copied its newest checkpoint into the run's folder leaves that
+    state.pt cut short: a rerun resumes from the newest whole one (torch.load fails on the other)."""
+    whole, cut = tmp_path / "checkpoint_1", tmp_path / "checkpoint_2"
+    for d in (whole, cut):
+        d.mkdir()
+    torch.save({"epoch": 1}, whole / "state.pt")
+    (cut / "state.pt").write_bytes((whole / "state.pt").read_bytes()[:-100])
+    os.utime(cut, (time.time() + 5, time.time() + 5))  # (the newest folder)
+    assert latest_checkpoint(tmp_path) == whole
+    assert latest_checkpoint(tmp_path / "none") is None
+
+
 @pytest.mark.slow
 def test_ray_training_on_two_workers_checkpoints_and_resumes(tiny_dataset, tmp_path):
     """EchoCNN-A on two Ray Train workers (distributed data parallel, gloo): it trains (its
@@ -87,10 +101,12 @@ def test_ray_training_on_two_workers_checkpoints_and_resumes(tiny_dataset, tmp_p
     state = torch.load(next((whole / "ray" / "echocnn_a").glob("checkpoint_*/state.pt")), weights_only=False)
     assert state["best"] < float("inf") and state["config"] == torch.load(whole / "models" / "echocnn_a.pt")["config"]
 
+    # Interrupted once a checkpoint is whole; another may be cut short as Ray copies it (the rerun
+    # passes over it: it once failed here, the interrupt landing mid-copy).
     ckpts = cut / "ray" / "echocnn_a"
-    code, err = _interrupt_when([*argv, "--out", cut], lambda: ckpts.is_dir() and any(ckpts.glob("checkpoint_*/state.pt")))
+    code, err = _interrupt_when([*argv, "--out", cut], lambda: latest_checkpoint(ckpts) is not None)
     assert code == 130, err
-    first = torch.load(next(ckpts.glob("checkpoint_*/state.pt")), weights_only=False)["epoch"]
+    first = torch.load(latest_checkpoint(ckpts) / "state.pt", weights_only=False)["epoch"]
     assert 1 <= first < 4  # interrupted between epochs
     r = run_cli(*argv, "--out", cut)
     assert r.returncode == 0, r.stderr

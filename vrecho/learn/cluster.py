@@ -30,6 +30,7 @@ import socket
 import sys
 import tempfile
 import threading
+import zipfile
 from pathlib import Path
 from typing import Callable
 
@@ -281,7 +282,7 @@ def fit_on_ray(address: str, *, name: str, model: Callable, load: Callable, seed
 
     from .train import History  # torch-bound: only when training
 
-    latest = _latest_checkpoint(Path(storage_path) / name)
+    latest = latest_checkpoint(Path(storage_path) / name)
     saved = None
     if latest is not None:  # a run that stopped, or ran its epochs, is read, not relaunched
         last = torch.load(latest / "state.pt", map_location="cpu", weights_only=False)
@@ -361,10 +362,24 @@ def _in_thread(call: Callable):
     return box["result"]
 
 
-def _latest_checkpoint(run_dir: Path) -> Path | None:
-    """The newest checkpoint folder of an earlier run of that name (Ray Train's layout:
-    ``checkpoint_<time>`` folders holding ``state.pt``), or None."""
-    found = sorted((p for p in run_dir.glob("checkpoint_*") if (p / "state.pt").is_file()),
+def latest_checkpoint(run_dir: Path) -> Path | None:
+    """The newest whole checkpoint folder of an earlier run, which a rerun resumes from.
+
+    Ray Train's layout: ``checkpoint_<time>`` folders holding ``state.pt``. One cut short (an
+    interrupt while Ray copied it into the run's folder: its zip archive has no end, and
+    ``torch.load`` fails on it) is passed over.
+
+    Parameters
+    ----------
+    run_dir : pathlib.Path
+        The run's folder (``storage_path / name``); it need not exist.
+
+    Returns
+    -------
+    pathlib.Path or None
+        The newest folder whose ``state.pt`` is whole, or None.
+    """
+    found = sorted((p for p in run_dir.glob("checkpoint_*") if zipfile.is_zipfile(p / "state.pt")),
                    key=lambda p: p.stat().st_mtime) if run_dir.is_dir() else []
     return found[-1] if found else None
 
