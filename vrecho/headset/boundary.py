@@ -587,8 +587,8 @@ class BoundaryMonitor:
         self._tracks += born
         updated += born
         for tr in updated:
-            tr.closed_m = tr.closed_in(0.8)
-            tr.approached_at = t if tr.closed_m >= self.approach_m else tr.approached_at
+            if tr.closed_in(0.8) >= self.approach_m:
+                tr.approached_at = t
         # Only a surface being approached can need an alert: the fits are for those.
         still = self._still = [tr.d_hat for tr in self._tracks if len(tr.times) >= 10 and tr.speed is not None
                                and abs(tr.speed) < 0.25 and tr.d_hat >= self.miss_m and tr.confirmed]
@@ -681,7 +681,7 @@ class BoundaryMonitor:
         self._verdict_track = None if best is None else best[3]
         if best is None:
             self._level = "clear"
-            moving = any(abs(tr.closed_m) >= self.approach_m for tr in self._tracks)
+            moving = any(abs(tr.closed_in(0.8)) >= self.approach_m for tr in self._tracks)
             self._verdict = Alert("clear", None, "opening" if moving else None, 0.0, None, None,
                                   () if any(tr.confirmed for tr in self._tracks) else ("no_echo",))
         else:

@@ -2,7 +2,7 @@
 (:func:`take`), the envelope of a pulse's window (:func:`correlate`: its FFTs rocket-fft's, ducc0's
 inside numba), a pulse's echoes in its envelope (:func:`echo_peaks`, their distances
 :func:`echo_distance`, the inverse of :func:`echo_path`), their pairing with the tracks (:func:`pair`, strengths weighed by
-:func:`amplitude_llr`), the lines that start tracks (:func:`lines`), and the tracks' fits
+:func:`amplitude_llr`, gates widened by the tracks' filters' :func:`predicted_cov`), the lines that start tracks (:func:`lines`), and the tracks' fits
 (:func:`closest_approach`, :func:`passing`, :func:`theil_sen`). Plain loops over a few hundred lags or a few
 dozen echoes, where a score of array calls cost more than the work; :mod:`.boundary`, :mod:`.echoes`
 and :mod:`.tracks` call them and say what each means. :func:`compile_kernels` makes them (or
@@ -32,6 +32,7 @@ def compile_kernels() -> None:
     echo_peaks(np.ones(16, np.float32), 2, 3.5, 1.0, np.zeros(16), np.ones(2), 0.0, 0.007, 0.07, 0.0, 0.12, 4.0)
     closest_approach(np.arange(10.0), np.ones(10), np.array([0.6, 0.45]), 0.4)
     passing(np.arange(10.0), np.ones(10), np.array([0.5]), 0.6)
+    predicted_cov(0.0, 0.0, 0.0, 0.04, 3.0)
     pair(np.ones(2), np.ones(2), np.ones((1, 8)), 1.0, 1.0, 0.01, 3.0)
     echo_path(1.0, 0.07, 0.0)  # (scalars, as the monitor calls it too)
     lines(np.ones(1), np.ones(1), np.ones(1), 0.5, -0.1, 0.1, 0.006)
@@ -514,6 +515,35 @@ def amplitude_llr(strength, clutter_strength):  # pragma: no cover (compiled)
 
 
 @njit(cache=True, nogil=True)
+def predicted_cov(pdd, pdv, pvv, dt, accel):  # pragma: no cover (compiled)
+    """A track's Kalman filter of distance and speed: its covariance ``dt`` seconds after the last
+    echo, the wearer's pace changing meanwhile (white acceleration ``accel``).
+    :meth:`~vrecho.headset.tracks.Track.update` and :func:`pair` both reckon with it.
+
+    Parameters
+    ----------
+    pdd, pdv, pvv : float
+        The covariance at the last echo: m^2, m^2/s, m^2/s^2.
+    dt : float
+        Seconds since the last echo.
+    accel : float
+        The white acceleration, m/s^2.
+
+    Returns
+    -------
+    pdd, pdv, pvv : float
+        The covariance ``dt`` later.
+
+    Examples
+    --------
+    >>> [round(v, 6) for v in predicted_cov(1e-4, 0.0, 0.01, 0.04, 3.0)]
+    [0.000122, 0.000688, 0.0244]
+    """
+    q = accel * accel * dt * dt
+    return pdd + dt * (2 * pdv + dt * pvv) + q * dt * dt / 4, pdv + dt * pvv + q * dt / 2, pvv + q
+
+
+@njit(cache=True, nogil=True)
 def pair(d, strength, state, t, mean, sigma_m, accel):  # pragma: no cover (compiled)
     """:func:`~vrecho.headset.tracks.associate`'s pairing: the likeliest pairs of echo and track
     within the tracks' gates first (the score's terms, :meth:`~vrecho.headset.tracks.Track.update`:
@@ -555,9 +585,7 @@ def pair(d, strength, state, t, mean, sigma_m, accel):  # pragma: no cover (comp
     for i in range(k):
         since = t - state[i, 2]
         predicted[i] = state[i, 0] + state[i, 1] * since
-        dt = since if since > 1e-3 else 1e-3
-        q = accel * accel * dt * dt
-        spread = state[i, 3] + dt * (2 * state[i, 4] + dt * state[i, 5]) + q * dt * dt / 4 + sigma_m * sigma_m
+        spread = predicted_cov(state[i, 3], state[i, 4], state[i, 5], max(since, 1e-3), accel)[0] + sigma_m * sigma_m
         gates[i] = max(state[i, 6], 2.5 * spread ** 0.5)
         doubt[i] = np.log1p(np.exp(-state[i, 7]))
     js, iis, costs = [], [], []

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .kernels import amplitude_llr, closest_approach, lines, pair, passing, theil_sen
+from .kernels import amplitude_llr, closest_approach, lines, pair, passing, predicted_cov, theil_sen
 
 
 _SIGMA_M = 0.01
@@ -148,9 +148,6 @@ class Track:
         :attr:`confirmed` above :data:`CONFIRMED`.
     cov : tuple of float
         The filter's covariance of distance and speed at the last echo: (m^2, m^2/s, m^2/s^2).
-    closed_m : float
-        :meth:`closed_in` over 0.8 s at the last echo, in metres, as the monitor keeps it (0
-        until then).
     """
 
     times: deque = field(default_factory=lambda: deque(maxlen=64))
@@ -165,7 +162,6 @@ class Track:
     gate_m: float = 0.12  # how far from its prediction an echo may lie and be this surface's
     score: float = 0.0  # log-likelihood ratio, a surface against stray peaks (see update)
     cov: tuple = (0.0, 0.0, 0.0)  # the filter's covariance of (distance, speed): dd, dv, vv
-    closed_m: float = 0.0  # closed_in(0.8) at the last echo (the monitor's)
 
     @property
     def surface(self) -> str:
@@ -187,13 +183,6 @@ class Track:
         """
         return self.d_hat + (self.speed or 0.0) * (t - self.times[-1])
 
-    def _predicted_cov(self, dt: float) -> tuple:
-        """The filter's covariance of distance and speed ``dt`` seconds after the last echo: the
-        wearer's pace may change meanwhile (white acceleration, :data:`_ACCEL`)."""
-        pdd, pdv, pvv = self.cov
-        q = _ACCEL * _ACCEL * dt * dt
-        return pdd + dt * (2 * pdv + dt * pvv) + q * dt * dt / 4, pdv + dt * pvv + q * dt / 2, pvv + q
-
     def spread(self, t: float) -> float:
         """How far a surface's echo may stray from :meth:`predict`, as the filter has it.
 
@@ -207,8 +196,8 @@ class Track:
         float
             The variance in square metres: the echo's own (:data:`_SIGMA_M` squared) and the
             prediction's, which grows with the time since the last echo (the wearer's pace may
-            change at up to :data:`_ACCEL`). (:func:`~.kernels.pair` widens the gates by the same,
-            compiled, for every track at once.)
+            change at up to :data:`_ACCEL`: :func:`~.kernels.predicted_cov`). (:func:`~.kernels.pair`
+            widens the gates by the same, compiled, for every track at once.)
 
         Examples
         --------
@@ -218,7 +207,7 @@ class Track:
         >>> bool(tr.spread(0.12) < tr.spread(0.20))
         True
         """
-        return self._predicted_cov(max(t - self.times[-1], 1e-3))[0] + _VAR_M
+        return predicted_cov.py_func(*self.cov, max(t - self.times[-1], 1e-3), _ACCEL)[0] + _VAR_M
 
     @property
     def stray(self) -> bool:
@@ -296,7 +285,7 @@ class Track:
                 self.cov = (_VAR_M, _VAR_M / dt, 2 * _VAR_M / (dt * dt))
                 self.score -= _LOG_YOUNG_GATE + log_clutter  # anywhere within the young gate
             else:
-                pdd, pdv, pvv = self._predicted_cov(dt)
+                pdd, pdv, pvv = predicted_cov.py_func(*self.cov, dt, _ACCEL)  # (numba's call costs more here)
                 s = pdd + _VAR_M  # the echo's spread about the prediction
                 predicted = self.d_hat + self.speed * dt
                 r = d - predicted
