@@ -4,7 +4,7 @@ the operating envelope, each condition on its own row.
 Frames of :func:`vrecho.sim.devices.echo_frame`: the user's own broadband probe
 (``random_probe``) passed as ``emitted``; ``surface_m`` the true distance plus a normal error of
 2 cm (a scan's plane). Conditions (:data:`vrecho.sim.devices.CONDITIONS`): those of
-:data:`TUNING` were used to tune :data:`vrecho.classifier.SURFACE_WEIGHTS` (``--fit``, seeds
+:data:`TUNING` were used to tune :data:`vrecho.planes.SURFACE_WEIGHTS` (``--fit``, seeds
 100 000 +); :data:`HELD_OUT` (AAC, 48 kHz, and all at once) never were. Every row here is on seeds
 200 000 + (rooms and devices never used for tuning).
 
@@ -12,8 +12,11 @@ A second table pools the frames by the surface's distance. A third asks about wa
 (:func:`vrecho.sim.devices.echo_frames`, seeds 300 000 +, never tuned on): 6 frames of one
 device stepping about in front of one surface, each frame asked with its own distance (the
 scan's plane, off by a normal 2 cm for the walk, and the pose's, 5 mm per frame), the answers
-fused by :func:`vrecho.classifier.fuse_open` over the first 1, 3 and 6 frames, and all 6 asked
-with the device's geometry known (``mic_toward_surface_m``, as the reconstruction asks).
+fused by :func:`vrecho.planes.fuse_open` over the first 1, 3 and 6 frames, and all 6 asked
+with the device's geometry known (``mic_toward_surface_m``, as the reconstruction asks); then
+the same walks by :func:`vrecho.planes.plane_open`, the plane's echo sought at one offset for
+all the frames (its one number, :data:`~vrecho.planes.WALK_BIAS`, fitted by ``--fit`` on
+walks of the tuning conditions, seeds 150 000 +).
 
 Per condition: frames, open/closed accuracy with ``surface_m`` (the physics), the expected
 calibration error of its probability (10 bins; beside it, what a perfectly calibrated model's
@@ -63,9 +66,9 @@ def _frame(args):
 
 def crowded(f, given: float, toward: float | None = None) -> bool:
     """Whether another echo of the room (:attr:`~vrecho.sim.devices.EchoFrame.paths_m`) lies in
-    the window :func:`vrecho.features.plane_echo` looks in at the distance ``given``
-    (:func:`vrecho.features.plane_window_m`; with the microphone ``toward`` the plane known or not)."""
-    from vrecho.features import plane_window_m
+    the window :func:`vrecho.planes.plane_echo` looks in at the distance ``given``
+    (:func:`vrecho.planes.plane_window_m`; with the microphone ``toward`` the plane known or not)."""
+    from vrecho.planes import plane_window_m
 
     lo, hi = plane_window_m(given, float(np.linalg.norm(f.device.mic_m)), mic_toward_m=toward)
     return any(lo <= p <= hi for p in f.paths_m)
@@ -112,10 +115,10 @@ def ece_floor(p: np.ndarray, draws: int = 400) -> float:
 
 
 def exact(rows) -> np.ndarray:
-    """:func:`vrecho.features.plane_echo`'s features of frames asked at their surface's exact
+    """:func:`vrecho.planes.plane_echo`'s features of frames asked at their surface's exact
     distance and the microphone's exact offset toward it (1 mm of tolerance): what one frame's
     microphone holds where the echo must be, with nothing of the scan's or the pose's error."""
-    from vrecho.features import plane_echo
+    from vrecho.planes import plane_echo
 
     out = np.empty((len(rows), 6))
     for fs in sorted({r[0].device.fs for r in rows}):
@@ -128,13 +131,44 @@ def exact(rows) -> np.ndarray:
 
 def bound(cache, n: int):
     """The exact path's logistic (:func:`exact`'s features), fitted on the tuning frames as
-    :data:`~vrecho.classifier.SURFACE_WEIGHTS` are: how well one frame could do were the scan and
+    :data:`~vrecho.planes.SURFACE_WEIGHTS` are: how well one frame could do were the scan and
     the pose exact, the room's other echoes at the echo's own delay and the loudspeaker's
     directivity all that is left."""
     from sklearn.linear_model import LogisticRegression
 
     rows = frames(TUNING, n, 100_000, cache)
     return LogisticRegression(C=0.1, max_iter=5000).fit(exact(rows), [r[0].is_open for r in rows])
+
+
+def walk_scores(rows, geometry: bool, k: int = WALK) -> np.ndarray:
+    """:func:`vrecho.planes.plane_open`'s log-odds toward closed, before :data:`WALK_BIAS`, of
+    walks (:func:`_walk`'s) from their first ``k`` frames, with the device's geometry known or not."""
+    from vrecho.planes import WALK_BIAS, plane_open
+
+    out = []
+    for fs_, given in rows:
+        fs_, given = fs_[:k], given[:k]
+        toward = [f.mic_toward_m for f in fs_] if geometry else None
+        a = plane_open(np.stack([f.audio for f in fs_]), fs_[0].device.fs, emitted=fs_[0].emitted, surface_m=given,
+                       mic_toward_surface_m=toward)
+        out.append(-np.log(a.p_open / (1 - a.p_open)) - WALK_BIAS)
+    return np.array(out)
+
+
+def fit_walk_bias(cache, n: int) -> None:
+    """:data:`vrecho.planes.WALK_BIAS` fitted on walks of the tuning conditions (seeds
+    150 000 +), their first 3 and all 6 frames, geometry known and not (the log-odds' scale held
+    at 1), and printed."""
+    from scipy.optimize import minimize_scalar
+
+    rows = frames(TUNING, n, 150_000, cache, task=_walk)
+    y = np.array([not fs_[0].is_open for fs_, _ in rows])
+    z = np.concatenate([walk_scores(rows, g, k) for g in (False, True) for k in (3, WALK)])
+    y = np.tile(y, 4)
+    loss = minimize_scalar(lambda b: float(np.mean(np.logaddexp(0, -(2 * y - 1) * (z + b)))), bounds=(-5, 5),
+                           method="bounded")
+    print(f"tuned on {len(rows)} walks of {WALK} frames ({', '.join(TUNING)}; seeds 150000+): WALK_BIAS =",
+          round(float(loss.x), 2), f"(accuracy {np.mean((z + loss.x > 0) == y):.3f})")
 
 
 def main() -> None:
@@ -149,7 +183,7 @@ def main() -> None:
     if a.fit:
         from sklearn.linear_model import LogisticRegression
 
-        from vrecho.features import plane_echo
+        from vrecho.planes import plane_echo
 
         rows = frames(TUNING, a.frames, 100_000, cache)
         x = plane_echo(np.stack([r[0].audio for r in rows]), np.stack([r[0].emitted for r in rows]),
@@ -159,6 +193,7 @@ def main() -> None:
         print(f"tuned on {len(rows)} frames ({', '.join(TUNING)}; seeds 100000+): accuracy {m.score(x, y):.3f}")
         print("SURFACE_WEIGHTS =", tuple(round(float(w), 4) for w in m.coef_[0]))
         print("SURFACE_BIAS =", round(float(m.intercept_[0]), 4))
+        fit_walk_bias(cache, a.walks)
         return
     import vrecho
 
@@ -231,8 +266,10 @@ def main() -> None:
 
 def walks(clf, conditions, n: int, cache) -> None:
     """The walks' table: open/closed of each walk's surface from its first 1, 3 and :data:`WALK`
-    frames, fused."""
-    from vrecho.classifier import fuse_open
+    frames, fused, and by one plane for all its frames (:func:`vrecho.planes.plane_open`)."""
+    from scipy.special import expit
+
+    from vrecho.planes import WALK_BIAS, fuse_open
 
     rows = frames(conditions, n, 300_000, cache, task=_walk)
     flat = [f for fs, _ in rows for f in fs]
@@ -241,6 +278,7 @@ def walks(clf, conditions, n: int, cache) -> None:
     cond = np.array([fs[0].condition for fs, _ in rows])
     ks = (1, 3, WALK)
     p = {}
+    one = {(g, k): expit(-(walk_scores(rows, g, k) + WALK_BIAS)) for g in (False, True) for k in (3, WALK)}
     for geometry in (False, True):
         kw = {"mic_toward_surface_m": np.array([f.mic_toward_m for f in flat])} if geometry else {}
         preds = ask(clf, flat, surface_m=given, **kw)
@@ -248,14 +286,19 @@ def walks(clf, conditions, n: int, cache) -> None:
         p.update({(geometry, k): np.array([fuse_open(q[:k]) for q in preds]) for k in ks})
     print(f"\nwalks: {n} per condition of {WALK} frames in front of one surface (seeds 300000+, never tuned on), "
           f"the answers fused (fuse_open) over the first 1, 3 and {WALK} frames; then {WALK} frames with the "
-          "device's geometry known (mic_toward_surface_m)\n")
-    print("| condition | walks | open | 1 frame | 3 frames | 6 frames | calibration error, 1 / 3 / 6 | 6 frames, geometry known |")
-    print("|---|---|---|---|---|---|---|---|")
+          "device's geometry known (mic_toward_surface_m); then one plane for all the frames (plane_open) "
+          f"over 3 and {WALK} frames, and {WALK} with the geometry known\n")
+    print("| condition | walks | open | 1 frame | 3 frames | 6 frames | calibration error, 1 / 3 / 6 | 6 frames, geometry known "
+          "| one plane: 3 / 6 frames | one plane, geometry known: 6 frames | calibration error, one plane: 6 / 6 known |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for c in (*conditions, "all"):
         m = np.ones(len(y), bool) if c == "all" else cond == c
         acc = " | ".join(f"{np.mean((p[False, k][m] > 0.5) == y[m]):.1%}" for k in ks)
         print(f"| {c} | {m.sum()} | {y[m].mean():.0%} | {acc} | {' / '.join(f'{ece(p[False, k][m], y[m]):.1%}' for k in ks)} "
-              f"| {np.mean((p[True, WALK][m] > 0.5) == y[m]):.1%} |", flush=True)
+              f"| {np.mean((p[True, WALK][m] > 0.5) == y[m]):.1%} "
+              f"| {np.mean((one[False, 3][m] > 0.5) == y[m]):.1%} / {np.mean((one[False, WALK][m] > 0.5) == y[m]):.1%} "
+              f"| {np.mean((one[True, WALK][m] > 0.5) == y[m]):.1%} "
+              f"| {ece(one[False, WALK][m], y[m]):.1%} / {ece(one[True, WALK][m], y[m]):.1%} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -63,7 +63,7 @@ def test_echo_response_needs_a_sound():
 def test_a_planes_echo_is_the_frames_own_whatever_its_batch():
     """plane_echo reads each frame alone: the same features whether the frame is asked about
     by itself or beside a frame asked about a plane 9 m away."""
-    from vrecho.features import plane_echo
+    from vrecho.planes import plane_echo
     from vrecho.signals import probe
 
     frame = np.zeros(44_100, np.float32)

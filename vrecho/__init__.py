@@ -7,7 +7,8 @@ is an opening, a pane of glass or a mirror, and how far away it is. The method, 
   capture device and its microphone arrays), ``materials`` (acoustic absorption per band),
   ``geometry`` (polygons), ``camera`` (poses, intrinsics, projection, crops, walkthrough
   paths), ``signals`` (the 16 emitted sounds, the probe, matched filters), ``features`` (log-mel
-  and echo features), ``models`` (EchoCNN and the baselines), ``classifier``
+  and echo features), ``planes`` (the echo of a plane whose distance a scan gives: open or
+  closed by physics), ``models`` (EchoCNN and the baselines), ``classifier``
   (:func:`load_classifier`: shipped weights, ``predict``), ``io``, ``colmap``, ``errors``;
 - ``reconstruct/`` (the scan, its discontinuities, what each is, the repair), ``capture/`` (real
   phone captures), ``headset/`` (the headset call, :class:`~vrecho.headset.BoundaryMonitor`;

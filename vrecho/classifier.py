@@ -40,8 +40,10 @@ from scipy.special import expit
 from threadpoolctl import ThreadpoolController
 
 from .errors import VrechoError, check_number
-from .features import (BAND_FS, PLANE_TOLERANCE_M, check_emitted, check_frames, check_mic_toward, check_surface,
-                       echo_features, logmel, self_features)
+from .features import (SILENCE_RMS, BAND_FS, check_emitted, check_frames,  # noqa: F401 (SILENCE_RMS)
+                       check_sounding, logmel, response_spectrum, self_features, spectrum_features)
+from .planes import (PLANE_TOLERANCE_M, SURFACE_BIAS, SURFACE_WEIGHTS, PlaneAnswer, check_mic_toward,  # noqa: F401
+                     check_surface, fuse_open, plane_echo_from_spectra, plane_open)  # (fuse_open, plane_open: here too)
 from .models import DEPTH_BINS_M, build
 from .signals import FS, MIN_COHERENCE, PULSE_S, analytic_envelope, analytic_filter, check_fs, clipped, coherence
 
@@ -49,7 +51,6 @@ CONFIDENCE_FLOOR = 0.7
 """Below this open/closed probability an answer is marked low-confidence."""
 FLAGGED_CONFIDENCE = 0.5
 """The most ``confidence`` a flagged answer gets: nothing vouches for it."""
-SILENCE_RMS = 1e-6
 PULSE_LAG_S = 0.01
 """How late a frame's direct sound may begin, in seconds (the loudspeaker up to 3 m away)."""
 PULSE_ABOVE_TAIL_DB = 6.0
@@ -226,21 +227,21 @@ class Classifier:
             those found here.
         surface_m : float or array_like, shape (B,), optional
             The distance from the loudspeaker to the surface's plane, per frame or for all
-            (the scan's or a depth camera's, within :data:`~vrecho.features.PLANE_TOLERANCE_M`),
+            (the scan's or a depth camera's, within :data:`~vrecho.planes.PLANE_TOLERANCE_M`),
             with ``emitted``. Open/closed then comes from the echo where that plane must echo
-            (:func:`~vrecho.features.plane_echo`: held against the room's other echoes around
+            (:func:`~vrecho.planes.plane_echo`: held against the room's other echoes around
             it and against the direct sound, whatever the loudspeaker's directivity or
-            gain), weighed by :data:`SURFACE_WEIGHTS`; a closed surface's depth is that
+            gain), weighed by :data:`~vrecho.planes.SURFACE_WEIGHTS`; a closed surface's depth is that
             echo's. ``model`` then ends in " + echo at surface_m".
         surface_tolerance_m : float
             How far ``surface_m`` may be off, in metres, 1 mm to 0.5 m
-            (:data:`~vrecho.features.PLANE_TOLERANCE_M`, 5 cm, by default; a scan that knows its
+            (:data:`~vrecho.planes.PLANE_TOLERANCE_M`, 5 cm, by default; a scan that knows its
             planes better narrows the window, and fewer of the room's other echoes share it).
         mic_toward_surface_m : float or array_like, shape (B,), optional
             How far the microphone sits from the loudspeaker toward the surface (along the
             plane's normal; negative behind), per frame or for all, where the device's geometry
             and pose are known (a scan knows both): the echo is then looked for at its exact
-            path (:func:`~vrecho.features.plane_echo`), not anywhere within the microphone's
+            path (:func:`~vrecho.planes.plane_echo`), not anywhere within the microphone's
             distance of twice ``surface_m``. Within 0.5 m; with ``surface_m`` only.
 
         Returns
@@ -264,10 +265,7 @@ class Classifier:
         given = _check_flags(flags, len(x))
         if not len(x):
             return []
-        rms = np.sqrt(np.mean(x.astype(np.float64) ** 2, axis=1))
-        if np.any(rms < SILENCE_RMS):
-            raise VrechoError(f"audio: frame {int(np.argmax(rms < SILENCE_RMS))} is silent "
-                              f"(RMS below {SILENCE_RMS:g}): is the microphone on?")
+        check_sounding(x)
         key, s, narrow = "A", None, None
         if emitted is not None:
             s = check_emitted(emitted, fs, len(x))
@@ -333,7 +331,8 @@ def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images:
     with ``surface`` (and ``s``), open/closed and a closed surface's depth by the echo there."""
     batch, out = {}, {"clipped": clipped(raw)}
     if s is not None:
-        f = echo_features(x, s, FS, surface_m=surface, tolerance_m=tolerance_m, mic_toward_m=toward)  # one deconvolution for both
+        spectrum = response_spectrum(x, s)  # one deconvolution for the model's features and the plane's echo
+        f = spectrum_features(spectrum, x.shape[-1])
         batch["envelope"], batch["bands"] = torch.as_tensor(f.envelope), torch.as_tensor(f.bands)
         out["no_pulse"] = ~_begins_with(x, s) | ~_decays(x, s.shape[-1])
     else:
@@ -351,60 +350,10 @@ def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images:
                depth_bin=torch.softmax(y["depth_bin"], 1).numpy(), depth_m=y["depth_m"].numpy(),
                src_m=y["src_m"].numpy())
     if surface is not None:
-        echo = f.plane
+        echo = plane_echo_from_spectra(spectrum, surface, tolerance_m, toward)
         out["open"] = expit(-(echo.features @ np.array(SURFACE_WEIGHTS) + SURFACE_BIAS))
         out["depth_m"] = np.where(out["open"] < 0.5, echo.depth_m, out["depth_m"])
     return out
-
-
-SURFACE_WEIGHTS = (-0.3942, 0.0626, 0.5264, 0.4994, -0.1106, 0.0047)
-"""How :class:`~vrecho.features.PlaneEcho`'s features weigh toward closed (a logistic, with
-:data:`SURFACE_BIAS`), tuned by ``python3 benchmarks/bench_surface.py --fit --frames 100`` on 900
-frames of every condition of the envelope but AAC, 48 kHz and all-at-once (seeds 100 000 and up;
-never the benchmark's)."""
-SURFACE_BIAS = -0.1893
-
-
-def fuse_open(predictions) -> float:
-    """The open probability of one surface heard in several frames, each asked with its own
-    ``surface_m`` (:meth:`Classifier.predict_batch`).
-
-    The mean of the frames' log-odds: the echo of a surface follows the device as it moves,
-    while another plane that shares its delay in one frame does not in the next, and a frame
-    where the room's other echoes crowd the window is outweighed by the others. Not a sum:
-    the frames of one walk share their room and device, so they are not independent
-    (``benchmarks/bench_surface.py`` measures the calibration of walks of 3 and 6 frames).
-
-    Parameters
-    ----------
-    predictions : sequence of Prediction
-        At least one.
-
-    Returns
-    -------
-    float
-        Probability that the surface is open.
-
-    Raises
-    ------
-    VrechoError
-        For no predictions, or something that is not one.
-
-    Examples
-    --------
-    >>> p = Prediction(True, "glass", 1.0, {"open": 0.9}, 0.9, False, "EchoCNN-E")
-    >>> q = Prediction(False, "glass", 1.0, {"open": 0.4}, 0.6, False, "EchoCNN-E")
-    >>> round(fuse_open([p, q]), 2)
-    0.71
-    """
-    try:
-        p = np.array([q.probabilities["open"] for q in predictions], np.float64)
-    except (TypeError, AttributeError, KeyError):
-        raise VrechoError("predictions: expected EchoCNN's predictions (Classifier.predict_batch)") from None
-    if not len(p):
-        raise VrechoError("predictions: expected at least one")
-    p = np.clip(p, 1e-9, 1 - 1e-9)
-    return float(expit(np.mean(np.log(p) - np.log1p(-p))))
 
 
 _THREADS = {"lock": threading.Lock(), "inside": 0, "saved": None, "pool": None}

@@ -8,8 +8,8 @@ mean and unit variance. At 25 time bins per second one bin spans 40 ms, far coar
 sound known, circular Wiener deconvolution of the frame recovers the room's impulse response
 (the frame is the steady state of a pulse train, a circular convolution), from which echo delays
 can be read to a fraction of a sample and band energies to a few milliseconds. With a surface's
-distance known as well (a scan's plane), :func:`plane_echo` reads what the response holds where
-that plane must echo. With the emitted sound unknown (the paper's protocol), :func:`self_features`
+distance known as well (a scan's plane), :mod:`vrecho.planes` reads what the response holds
+where that plane must echo. With the emitted sound unknown (the paper's protocol), :func:`self_features`
 reads the same delays off the recording's own whitened autocorrelation: the direct sound is the
 reference.
 """
@@ -26,8 +26,8 @@ import scipy.ndimage
 import scipy.signal
 
 from .device import MIC_ABOVE_EMITTER_M
-from .errors import VrechoError, check_float32, check_per_frame
-from .signals import FS, SPEED_OF_SOUND, check_fs, parabolic_peaks
+from .errors import VrechoError, check_float32
+from .signals import FS, SPEED_OF_SOUND, check_fs
 
 N_FFT = 2048
 HOP = 512
@@ -93,6 +93,29 @@ def _window() -> np.ndarray:
 def _mel_basis() -> np.ndarray:
     """librosa's mel filters, (STFT bins, mel bands) float32 (built once: 2 ms a call)."""
     return np.ascontiguousarray(librosa.filters.mel(sr=FS, n_fft=N_FFT, n_mels=N_MELS, fmax=FS / 2).T, np.float32)
+
+
+SILENCE_RMS = 1e-6
+"""Frames quieter than this (RMS) are silent (:func:`check_sounding`)."""
+
+
+def check_sounding(x: np.ndarray) -> None:
+    """Refuse checked frames of which one is silent (RMS below :data:`SILENCE_RMS`).
+
+    Parameters
+    ----------
+    x : numpy.ndarray, shape (B, n) or (n,)
+        Frames :func:`check_frames` took.
+
+    Raises
+    ------
+    VrechoError
+        Naming the first silent frame.
+    """
+    rms = np.sqrt(np.mean(x.astype(np.float64) ** 2, axis=-1)).reshape(-1)
+    if np.any(rms < SILENCE_RMS):
+        raise VrechoError(f"audio: frame {int(np.argmax(rms < SILENCE_RMS))} is silent "
+                          f"(RMS below {SILENCE_RMS:g}): is the microphone on?")
 
 
 def check_emitted(emitted, fs, n_frames: int | None = None) -> np.ndarray:
@@ -252,15 +275,30 @@ def echo_response(audio, emitted, fs: int = FS, *, length_s: float | None = ECHO
     300
     """
     x = check_frames(audio, fs)
-    h = scipy.fft.irfft(_response_spectrum(x, check_emitted(emitted, fs, None if x.ndim == 1 else len(x)), regularization),
+    h = scipy.fft.irfft(response_spectrum(x, check_emitted(emitted, fs, None if x.ndim == 1 else len(x)), regularization),
                         x.shape[-1])
     if length_s is not None:
         h = h[..., :int(round(length_s * FS))]
     return h.astype(np.float32)
 
 
-def _response_spectrum(x: np.ndarray, s: np.ndarray, regularization: float = 1e-3) -> np.ndarray:
-    """The spectrum of :func:`echo_response` of checked frames ``x`` and sounds ``s``."""
+def response_spectrum(x: np.ndarray, s: np.ndarray, regularization: float = 1e-3) -> np.ndarray:
+    """The spectrum of :func:`echo_response`: the frames' spectra times the sounds' Wiener
+    inverse filter.
+
+    Parameters
+    ----------
+    x : numpy.ndarray, shape (..., n)
+        Frames :func:`check_frames` took.
+    s : numpy.ndarray, shape (k,) or (..., k)
+        Sounds :func:`check_emitted` took: one for every frame (its filter cached), or one each.
+    regularization : float
+        The inverse filter's floor, as a share of the sound's strongest bin's power.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., n // 2 + 1), complex
+    """
     n = x.shape[-1]
     if s.ndim == 1:  # one sound for every frame: its inverse filter, cached (a device repeats its probe)
         G = _cached_inverse_filter(s.tobytes(), n, regularization)
@@ -281,11 +319,6 @@ def _cached_inverse_filter(sound: bytes, n: int, regularization: float) -> np.nd
     return _inverse_filter(np.frombuffer(sound, np.float32), n, regularization)
 
 
-PLANE_TOLERANCE_M = 0.05
-"""How far the given distance to a surface's plane may be off (a scan's or a depth camera's
-plane: a few centimetres)."""
-
-
 @dataclass
 class EchoFeatures:
     """Echo features of one or more frames.
@@ -298,18 +331,13 @@ class EchoFeatures:
     bands : numpy.ndarray, shape (..., 7, 20), float32
         Log energy of the estimated response in the octave bands of :data:`DECAY_BANDS_HZ` over
         20 bins of 25 ms (0 to 0.5 s), in dB relative to the strongest cell, floored at -120 dB.
-    plane : PlaneEcho or None
-        The echo where a plane whose distance was given must echo (:func:`plane_echo`, from the
-        same deconvolution); None where none was given.
     """
 
     envelope: np.ndarray
     bands: np.ndarray
-    plane: PlaneEcho | None = None
 
 
-def echo_features(audio, emitted, fs: int = FS, *, surface_m=None, tolerance_m: float = PLANE_TOLERANCE_M,
-                  mic_toward_m=None) -> EchoFeatures:
+def echo_features(audio, emitted, fs: int = FS) -> EchoFeatures:
     """:class:`EchoFeatures` of frames whose emitted sound is known.
 
     Both come from the impulse response of :func:`echo_response` over the whole frame; the
@@ -323,31 +351,39 @@ def echo_features(audio, emitted, fs: int = FS, *, surface_m=None, tolerance_m: 
         The emitted sound at the same rate: one for every frame, or one per frame.
     fs : int
         Sample rate of both, in Hz (resampled to 44.1 kHz).
-    surface_m, tolerance_m, mic_toward_m : optional
-        A plane's distance, per frame or for all, and its window, as :func:`plane_echo` takes
-        them: its echo comes with the features, from the same deconvolution.
 
     Returns
     -------
     EchoFeatures
-        ``envelope`` (..., 1323) and ``bands`` (..., 7, 20), float32; ``plane`` (one row per
-        frame) with ``surface_m``.
+        ``envelope`` (..., 1323) and ``bands`` (..., 7, 20), float32.
 
     Raises
     ------
     VrechoError
-        For frames :func:`check_frames` refuses, sounds :func:`check_emitted` refuses, or what
-        :func:`plane_echo` refuses.
+        For frames :func:`check_frames` refuses or sounds :func:`check_emitted` refuses.
     """
     x = check_frames(audio, fs)
-    spectrum = _response_spectrum(x, check_emitted(emitted, fs, None if x.ndim == 1 else len(x)))
-    h = scipy.fft.irfft(spectrum, x.shape[-1]).astype(np.float32)  # echo_response's, whole
-    plane = None
-    if surface_m is not None:
-        rows = spectrum.reshape(-1, spectrum.shape[-1])
-        toward = None if mic_toward_m is None else check_mic_toward(mic_toward_m, len(rows))
-        plane = _plane_echo(rows, check_surface(surface_m, len(rows)), tolerance_m, toward)
-    return EchoFeatures(_direct_one(h[..., :int(round(ECHO_WINDOW_S * FS))]), _decay_bands(h), plane)
+    return spectrum_features(response_spectrum(x, check_emitted(emitted, fs, None if x.ndim == 1 else len(x))),
+                             x.shape[-1])
+
+
+def spectrum_features(spectrum: np.ndarray, n: int) -> EchoFeatures:
+    """:func:`echo_features` of response spectra: for a caller that reads more of one
+    deconvolution (:func:`vrecho.planes.plane_echo_from_spectra`), computed once.
+
+    Parameters
+    ----------
+    spectrum : numpy.ndarray, shape (..., n // 2 + 1), complex
+        :func:`response_spectrum` of the frames.
+    n : int
+        The frames' length in samples.
+
+    Returns
+    -------
+    EchoFeatures
+    """
+    h = scipy.fft.irfft(spectrum, n).astype(np.float32)  # echo_response's, whole
+    return EchoFeatures(_direct_one(h[..., :int(round(ECHO_WINDOW_S * FS))]), _decay_bands(h))
 
 
 def _direct_one(early: np.ndarray) -> np.ndarray:
@@ -435,7 +471,7 @@ def self_features(audio, fs: int = FS) -> EchoFeatures:
     f = np.fft.rfftfreq(n, 1 / FS)
     width = max(int(round(SELF_SMOOTH_HZ / (f[1] - f[0]))), 1)
     smooth = scipy.ndimage.uniform_filter1d(power, width, axis=-1, mode="nearest")
-    band = _band(f, *SELF_BAND_HZ).astype(np.float32)
+    band = band_weights(f, *SELF_BAND_HZ).astype(np.float32)
     white = band * power / (smooth + 1e-6 * smooth.max(axis=-1, keepdims=True) + 1e-30)  # -60 dB: not lifted
     r = scipy.fft.irfft(white, n, axis=-1)[..., :length - lag0 + 1]
     early = np.concatenate([r[..., lag0:0:-1], r[..., :length - lag0]], axis=-1)  # lag 0 at the direct sound's delay
@@ -451,245 +487,28 @@ def _band_sums(bin_len: int) -> tuple[np.ndarray, np.ndarray]:
     return np.hanning(bin_len).astype(np.float32), bands.astype(np.float32)
 
 
-RING_M = 1.0
-"""The echoes around a plane's delay that :func:`plane_echo` holds its echo against: this much
-path on either side."""
-
-
-@dataclass
-class PlaneEcho:
-    """The echo of a plane whose distance is known, per frame (:func:`plane_echo`).
-
-    Attributes
-    ----------
-    features : numpy.ndarray, shape (B, 6), float
-        In each band of :data:`PLANE_BANDS_HZ`: the strongest echo at the plane's delay (each
-        weighed by how likely the plane's echo is there, :func:`_window_prior`) over the
-        median of the echoes around it (:data:`RING_M` of path on either side), over the
-        strongest of them, and over the direct sound with spherical spreading undone (as if
-        the microphone sat on the loudspeaker), in dB of the envelope.
-    depth_m : numpy.ndarray, shape (B,), float
-        The distance that echo says, from the loudspeaker to the plane.
-    """
-
-    features: np.ndarray
-    depth_m: np.ndarray
-
-
-PLANE_BANDS_HZ = ((300.0, 15000.0), (2000.0, 15000.0))
-"""The bands :func:`plane_echo` reads: what every probe and loudspeaker holds (AAC keeps to 15
-kHz and 16), and where the direct sound rings least."""
-
-
-def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = PLANE_TOLERANCE_M,
-               mic_toward_m=None) -> PlaneEcho:
-    """What the impulse response holds where a plane ``surface_m`` in front of the device
-    must echo.
-
-    The direct sound's delay gives the microphone's distance from the loudspeaker, r (in any
-    direction: the echo's path, loudspeaker to the plane's mirror image of it to the
-    microphone, lies between 2 d - r and 2 d + r), and d is ``surface_m`` within
-    ``tolerance_m``. The echo there is held against the room's other echoes at nearby delays
-    in the same frame, and against the direct sound (:class:`PlaneEcho`).
-
-    Parameters
-    ----------
-    audio : array_like, shape (n,) or (B, n), float
-        1 s frames starting at the pulse onset, n = round(``fs``) samples.
-    emitted : array_like, shape (k,) or (B, k), float
-        The emitted sound at the same rate.
-    surface_m : float or array_like, shape (B,)
-        Distance from the loudspeaker to the plane, in metres, per frame or for all.
-    fs : int
-        Sample rate in Hz (resampled to 44.1 kHz).
-    tolerance_m : float
-        How far ``surface_m`` may be off (default :data:`PLANE_TOLERANCE_M`).
-    mic_toward_m : float or array_like, shape (B,), optional
-        How far the microphone sits from the loudspeaker toward the plane (along its normal,
-        negative behind), per frame or for all, where the device's geometry and pose are
-        known: the echo's path is then sqrt(4 d^2 - 4 d a + r^2), and the window only
-        ``tolerance_m`` wide on either side of d (not also r on either side of 2 d).
-
-    Returns
-    -------
-    PlaneEcho
-        One row per frame.
-
-    Raises
-    ------
-    VrechoError
-        For frames :func:`check_frames` refuses, sounds :func:`check_emitted` refuses, or a
-        ``surface_m`` :func:`check_surface` refuses.
-
-    Examples
-    --------
-    The probe and a plane's echo 600 samples later (2.33 m away), asked about 2.3 m and 1.5 m:
-
-    >>> from vrecho.signals import probe
-    >>> frame = np.zeros(44_100, np.float32)
-    >>> frame[:4410] += probe()
-    >>> frame[600:5010] += 0.3 * probe()
-    >>> e = plane_echo(np.stack([frame, frame]), probe(), [2.3, 1.5])
-    >>> (e.features[:, 0] > 20).tolist(), round(float(e.depth_m[0]), 2)
-    ([True, False], 2.33)
-    """
-    x = check_frames(audio, fs)
-    x = x.reshape(-1, x.shape[-1])
-    d = check_surface(surface_m, len(x))
-    toward = None if mic_toward_m is None else check_mic_toward(mic_toward_m, len(x))
-    return _plane_echo(_response_spectrum(x, check_emitted(emitted, fs, len(x))), d, tolerance_m, toward)
-
-
-def _plane_echo(spectrum: np.ndarray, d: np.ndarray, tolerance_m: float, toward: np.ndarray | None) -> PlaneEcho:
-    """:func:`plane_echo` of the response spectra (B, bins) of checked frames, their checked
-    distances ``d`` (B,) and offsets ``toward`` (B,) or None."""
-    c = SPEED_OF_SOUND
-    ring = int(np.ceil(RING_M / c * FS))
-    # one length for every frame, the farthest plane's (a frame's envelope must not depend on its batch)
-    n = min(int(np.ceil((2 * (MAX_SURFACE_M + tolerance_m) + 0.3) / c * FS)) + ring + 8, FS)
-    f = np.fft.rfftfreq(FS, 1 / FS)
-    gap = int(np.ceil(0.1 / c * FS))  # 10 cm of path kept clear between the window and the ring
-    features, depth = np.empty((len(d), 3 * len(PLANE_BANDS_HZ))), np.empty(len(d))
-    for b, (lo_hz, hi_hz) in enumerate(PLANE_BANDS_HZ):
-        h = scipy.fft.irfft(spectrum * _band(f, lo_hz, hi_hz), FS, axis=-1)[:, :n]
-        env = np.abs(scipy.signal.hilbert(h, axis=-1))
-        for i, e in enumerate(env):
-            t0 = int(np.argmax(e[:int(0.002 * FS)]))  # the direct sound: the microphone r from the loudspeaker
-            r = c * t0 / FS
-            a = None if toward is None else float(np.clip(toward[i], -r, r))
-            near, far = plane_window_m(d[i], r, tolerance_m, a)
-            lo = max(int(np.floor(near / c * FS)), t0 + gap)
-            hi = max(int(np.ceil(far / c * FS)), lo + 1)
-            prior = _window_prior(lo, hi, near, far, 2 * d[i] if a is None else _image_path(d[i], a, r))
-            p = lo + int(np.argmax(e[lo:hi + 1] * prior))
-            peak = e[p] * prior[p - lo]
-            around = np.concatenate([e[max(lo - gap - ring, t0 + gap):max(lo - gap, t0 + gap)], e[hi + gap:hi + gap + ring]])
-            path = c * float(parabolic_peaks(e, (p,))[0]) / FS
-            features[i, 3 * b:3 * b + 3] = 20 * np.log10(np.maximum(
-                [peak / max(float(np.median(around)), 1e-300), peak / max(float(around.max()), 1e-300),
-                 peak / max(float(e[t0]), 1e-300) * path / max(r, 0.01)], 1e-300))
-            if b == 0:
-                a = 0.0 if a is None else a
-                depth[i] = (a + np.sqrt(max(a ** 2 - r ** 2 + path ** 2, 0.0))) / 2  # _image_path solved for d
-    return PlaneEcho(features, depth)
-
-
-def _window_prior(lo: int, hi: int, near: float, far: float, centre: float) -> np.ndarray:
-    """How likely the plane's echo is at each sample ``lo`` to ``hi`` of its window ``near`` to
-    ``far`` (metres of path; peak 1): a normal centred where it falls with the plane exactly
-    where given (``centre``: 2 d where the microphone's direction is unknown, for a device's
-    microphone sits mostly beside its loudspeaker, not ahead of it), its deviation half the
-    window. A room's other echo near the window's edge then counts for less than one where the
-    scan puts the plane (on the tuning frames: 83.3 -> 86.0 % in cross-validation of the broad
-    band's features alone)."""
-    path = SPEED_OF_SOUND * np.arange(lo, hi + 1) / FS
-    return np.exp(-0.5 * ((path - centre) / max((far - near) / 2, 1e-3)) ** 2)
-
-
-def plane_window_m(d: float, r: float, tolerance_m: float = PLANE_TOLERANCE_M, mic_toward_m: float | None = None
-                   ) -> tuple[float, float]:
-    """The nearest and farthest path, loudspeaker to microphone, of the echo of a plane ``d``
-    metres away (within ``tolerance_m``), the microphone ``r`` from the loudspeaker: anywhere
-    within r of 2 d, or, with the microphone ``mic_toward_m`` toward the plane (at most r
-    either way), sqrt(4 d^2 - 4 d a + r^2).
-
-    Parameters
-    ----------
-    d, r, tolerance_m : float
-        Metres.
-    mic_toward_m : float, optional
-        Metres, within -r to r.
-
-    Returns
-    -------
-    near, far : float
-        Metres of path: where :func:`plane_echo` looks for the echo.
-
-    Examples
-    --------
-    >>> [round(v, 3) for v in plane_window_m(1.0, 0.07)]
-    [1.83, 2.17]
-    >>> [round(v, 3) for v in plane_window_m(1.0, 0.07, mic_toward_m=0.0)]
-    [1.901, 2.101]
-    """
-    if mic_toward_m is None:  # the microphone anywhere r away: the path lies within 2 d -+ r
-        return 2 * (d - tolerance_m) - r, 2 * (d + tolerance_m) + r
-    return tuple(_image_path(max(d + k * tolerance_m, mic_toward_m / 2), mic_toward_m, r) for k in (-1, 1))
-
-
-def _image_path(d: float, a: float, r: float) -> float:
-    """The echo's path off a plane ``d`` from the loudspeaker, the microphone ``r`` from it and ``a``
-    toward the plane: loudspeaker to its mirror image, to the microphone."""
-    return float(np.sqrt(max(4 * d * d - 4 * d * a + r * r, 0.0)))
-
-
-def check_mic_toward(mic_toward_m, n: int) -> np.ndarray:
-    """The microphone's offsets toward a surface's plane checked: finite, within 0.5 m.
-
-    Parameters
-    ----------
-    mic_toward_m : float or array_like, shape (n,)
-        Metres, along the plane's normal (negative: behind the loudspeaker); one for every
-        frame, or one per frame.
-    n : int
-        How many frames they are for.
-
-    Returns
-    -------
-    numpy.ndarray, shape (n,), float64
-        One offset per frame.
-
-    Raises
-    ------
-    VrechoError
-        Naming ``mic_toward_surface_m`` and what is wrong with it.
-    """
-    a = check_per_frame(mic_toward_m, n, "mic_toward_surface_m", "offset")
-    if not np.all(np.isfinite(a)) or np.any(np.abs(a) > 0.5):
-        raise VrechoError(f"mic_toward_surface_m: expected finite offsets within 0.5 m, got {a.tolist()}")
-    return a
-
-
 PLANE_TAPER_HZ = 1000.0
 """The raised-cosine edges of :data:`PLANE_BANDS_HZ`: a sharp band edge rings, and the direct
 sound's ringing (50 dB over a far echo where the microphone sits a centimetre from the
 loudspeaker) would cover the echo."""
 
 
-def _band(f: np.ndarray, lo_hz: float, hi_hz: float) -> np.ndarray:
+def band_weights(f: np.ndarray, lo_hz: float, hi_hz: float) -> np.ndarray:
     """Weights of the band ``lo_hz`` to ``hi_hz`` over frequencies ``f``, with raised-cosine
-    edges :data:`PLANE_TAPER_HZ` wide inside it."""
-    up = np.clip((f - lo_hz) / PLANE_TAPER_HZ, 0, 1)
-    down = np.clip((hi_hz - f) / PLANE_TAPER_HZ, 0, 1)
-    return (0.5 - 0.5 * np.cos(np.pi * up)) * (0.5 - 0.5 * np.cos(np.pi * down))
-
-
-MAX_SURFACE_M = 10.0
-"""The farthest a surface's plane may be given (:func:`check_surface`)."""
-
-
-def check_surface(surface_m, n: int) -> np.ndarray:
-    """Distances to a surface's plane checked: finite, positive, at most 10 m; one per frame.
+    edges :data:`PLANE_TAPER_HZ` wide inside it.
 
     Parameters
     ----------
-    surface_m : float or array_like, shape (n,)
-        Metres.
-    n : int
-        Frames.
+    f : numpy.ndarray
+        Frequencies in Hz.
+    lo_hz, hi_hz : float
+        The band's edges in Hz.
 
     Returns
     -------
-    numpy.ndarray, shape (n,), float64
-
-    Raises
-    ------
-    VrechoError
-        Naming what is wrong.
+    numpy.ndarray
+        0 to 1, the shape of ``f``.
     """
-    d = check_per_frame(surface_m, n, "surface_m", "distance")
-    if not np.all(np.isfinite(d)) or np.any(d <= 0) or np.any(d > MAX_SURFACE_M):
-        raise VrechoError(f"surface_m: expected finite distances above 0 and at most {MAX_SURFACE_M:g} m, "
-                          f"got {d.tolist()}")
-    return d
-
+    up = np.clip((f - lo_hz) / PLANE_TAPER_HZ, 0, 1)
+    down = np.clip((hi_hz - f) / PLANE_TAPER_HZ, 0, 1)
+    return (0.5 - 0.5 * np.cos(np.pi * up)) * (0.5 - 0.5 * np.cos(np.pi * down))

@@ -17,7 +17,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..camera import View, crop_view, device_pose
-from ..features import MAX_SURFACE_M
+from ..planes import MAX_SURFACE_M, plane_open
 from .discontinuities import Hole, Plane, facing, seen_through
 from .scan import Echoes
 
@@ -85,9 +85,10 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
     the hole is scanned, so the distance to a closed surface's plane is known. A frame whose
     specular point, the foot of the loudspeaker's perpendicular to that plane, falls in the hole
     is asked with it (``surface_m``: open/closed by the echo there or none,
-    :func:`~vrecho.features.plane_echo`); those frames' answers, fused
-    (:func:`~vrecho.classifier.fuse_open`), decide open or closed, and EchoCNN's alone where no
-    frame's foot falls in the hole. A frame's depth is its echo's where it agrees with the scan
+    :func:`~vrecho.planes.plane_echo`), and those frames together decide open or closed by
+    the echo where one offset of the scan's plane puts it in all of them
+    (:func:`~vrecho.planes.plane_open`: the plane's error is the scan's, the same from every
+    pose); EchoCNN's answers alone decide where no frame's foot falls in the hole. A frame's depth is its echo's where it agrees with the scan
     within 10 cm, else the scan's. The geometry seen through the hole, reflected in its plane
     (:func:`mirror_evidence`), says mirror or not where it is clear (200 or more vertices seen
     through), and glass where almost nothing is seen through (fewer than 50: a mirror always
@@ -123,8 +124,9 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
         ``model``, ``p_closed``, ``p_mirror``, ``echo_depth_m`` (EchoCNN's), ``scan_depth_m``
         (emitter to the wall's plane), ``depth_m`` (the one used) and ``offset_m`` (metres);
         with ``use_scan`` also ``foot_in_hole``. :attr:`Decision.evidence` holds
-        ``echo_frames`` and ``p_echo_closed`` (the frames asked with the plane's distance, and
-        their fused answer; where a specular point fell in the hole) and ``mirrored_share`` and
+        ``echo_frames``, ``p_echo_closed`` and ``plane_offset_m`` (the frames asked with the
+        plane's distance, their answer together, and how far the echo puts the plane beyond the
+        scan's; where a specular point fell in the hole) and ``mirrored_share`` and
         ``seen_through_vertices`` (with a mesh); empty without ``use_scan``.
 
     Raises
@@ -132,7 +134,7 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
     VrechoError
         From EchoCNN, for a recording it cannot take (a silent frame, or one not 1 s long).
     """
-    from ..classifier import fuse_open, load_classifier  # torch-bound (1.7 s): only when EchoCNN is asked
+    from ..classifier import load_classifier  # torch-bound (1.7 s): only when EchoCNN is asked
 
     if classifier is None:
         classifier = load_classifier()
@@ -161,7 +163,7 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
                 row["foot_in_hole"] = foot_in_hole
                 row["depth_m"] = pred.depth_m if abs(pred.depth_m - scan_depth) < 0.1 else scan_depth
                 if surface is not None:
-                    heard.append(pred)
+                    heard.append((audio, surface, toward))
             else:
                 row["depth_m"] = pred.depth_m
             row["offset_m"] = row["depth_m"] - float(n @ pose.emitter)
@@ -171,8 +173,11 @@ def infer(holes_: list[Hole], views: list[View], echoes: Echoes, *, classifier=N
         evidence = {}
         if use_scan:
             if heard:
-                p_closed = 1.0 - fuse_open(heard)
-                evidence.update(echo_frames=len(heard), p_echo_closed=p_closed)
+                audio, surface, toward = zip(*heard)
+                walk = plane_open(np.stack(audio), echoes.fs, emitted=echoes.emitted, surface_m=surface,
+                                  mic_toward_surface_m=toward, surface_tolerance_m=SCAN_TOLERANCE_M)
+                p_closed = 1.0 - walk.p_open
+                evidence.update(echo_frames=len(heard), p_echo_closed=p_closed, plane_offset_m=walk.offset_m)
             if mesh is not None:
                 share, count = mirror_evidence(mesh, hole, walls, cameras)
                 evidence.update(mirrored_share=share, seen_through_vertices=count)
@@ -209,7 +214,7 @@ def scan_distance(view: View, hole: Hole) -> tuple[float | None, float | None]:
     -------
     surface_m, mic_toward_surface_m : float or None
         Metres; both None where the foot falls outside the hole or the plane is not 0 to
-        :data:`~vrecho.features.MAX_SURFACE_M` ahead.
+        :data:`~vrecho.planes.MAX_SURFACE_M` ahead.
     """
     _, _, surface, toward = _scan_geometry(device_pose(view), hole)
     return surface, toward

@@ -37,7 +37,7 @@ CONDITIONS = ("reference", "omni", "bottom-firing", "offset", "near floor", "nea
 (``"envelope"``), or none (``"reference"``: the reference device, upright, at the surface's
 height)."""
 TUNING = ("reference", "omni", "bottom-firing", "offset", "near floor", "near ceiling", "tilted", "transducer", "limiter")
-"""The conditions tuning and training draw from (:data:`vrecho.classifier.SURFACE_WEIGHTS`,
+"""The conditions tuning and training draw from (:data:`vrecho.planes.SURFACE_WEIGHTS`,
 EchoCNN-E's device frames): all but AAC, 48 kHz and all at once, which the benchmarks hold out."""
 
 
