@@ -34,8 +34,7 @@ def _peak_time(h: np.ndarray, lo: int, hi: int) -> float:
 
 @pytest.mark.parametrize("depth", DEPTHS_M)
 def test_echo_delay_and_opening_energy(depth, tmp_path):
-    from vrecho.planes import SURFACE_BIAS, SURFACE_WEIGHTS
-    from vrecho.planes import plane_echo
+    from vrecho.planes import SURFACE_BIAS, SURFACE_WEIGHTS, plane_echo
 
     sound = probe()
     energies, levels = {}, {}

@@ -42,8 +42,8 @@ from threadpoolctl import ThreadpoolController
 from .errors import VrechoError, check_number
 from .features import (SILENCE_RMS, BAND_FS, check_emitted, check_frames,  # noqa: F401 (SILENCE_RMS)
                        check_sounding, logmel, response_spectrum, self_features, spectrum_features)
-from .planes import (PLANE_TOLERANCE_M, SURFACE_BIAS, SURFACE_WEIGHTS, PlaneAnswer, check_mic_toward,  # noqa: F401
-                     check_surface, fuse_open, plane_echo_from_spectra, plane_open)  # (fuse_open, plane_open: here too)
+from .planes import (PLANE_TOLERANCE_M, SURFACE_BIAS, SURFACE_WEIGHTS, check_mic_toward, check_surface,  # noqa: F401
+                     fuse_open, plane_echo_from_spectra)  # (fuse_open: its name here before vrecho.planes)
 from .models import DEPTH_BINS_M, build
 from .signals import FS, MIN_COHERENCE, PULSE_S, analytic_envelope, analytic_filter, check_fs, clipped, coherence
 

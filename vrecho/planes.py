@@ -212,7 +212,7 @@ def plane_echo_from_spectra(spectrum: np.ndarray, d: np.ndarray, tolerance_m: fl
             features[i, 3 * b:3 * b + 3] = _plane_db(peak, _ring(e, lo, hi, t0, gap, ring), e[t0], path, r)
             if b == 0:
                 a = 0.0 if a is None else a
-                depth[i] = (a + np.sqrt(max(a ** 2 - r ** 2 + path ** 2, 0.0))) / 2  # _image_path solved for d
+                depth[i] = _image_depth(path, a, r)
     return PlaneEcho(features, depth)
 
 
@@ -359,15 +359,14 @@ def plane_walk(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
             t0, r = _direct(e)
             a = 0.0 if toward is None else float(np.clip(toward[i], -r, r))
             dd = np.maximum(d[i] + offsets, a / 2)
-            path = np.sqrt(np.maximum(4 * dd * dd - 4 * dd * a + r * r, 0.0))  # _image_path, every offset
+            path = _image_path(dd, a, r)  # every offset's
             at = np.clip(np.round(path / c * FS).astype(int), t0 + gap + w, env.shape[-1] - 2 - w)
             lo, hi = int(at.min()) - w, int(at.max()) + w
             features[i, :, 3 * b:3 * b + 3] = _plane_db(top[i, at], _ring(e, lo, hi, t0, gap, ring), e[t0], path, r)
             if b == 0:  # where, near each offset's path, the echo peaks
                 near = at[:, None] + np.arange(-w, w + 1)
                 k = near[np.arange(len(at)), np.argmax(e[near], axis=1)]
-                found = c * parabolic_peaks(e, k) / FS
-                depth[i] = (a + np.sqrt(np.maximum(a * a - r * r + found ** 2, 0.0))) / 2  # _image_path solved for d
+                depth[i] = _image_depth(c * parabolic_peaks(e, k) / FS, a, r)
     return PlaneWalk(features, offsets, depth)
 
 
@@ -411,13 +410,20 @@ def plane_window_m(d: float, r: float, tolerance_m: float = PLANE_TOLERANCE_M, m
     """
     if mic_toward_m is None:  # the microphone anywhere r away: the path lies within 2 d -+ r
         return 2 * (d - tolerance_m) - r, 2 * (d + tolerance_m) + r
-    return tuple(_image_path(max(d + k * tolerance_m, mic_toward_m / 2), mic_toward_m, r) for k in (-1, 1))
+    return tuple(float(_image_path(max(d + k * tolerance_m, mic_toward_m / 2), mic_toward_m, r)) for k in (-1, 1))
 
 
-def _image_path(d: float, a: float, r: float) -> float:
-    """The echo's path off a plane ``d`` from the loudspeaker, the microphone ``r`` from it and ``a``
-    toward the plane: loudspeaker to its mirror image, to the microphone."""
-    return float(np.sqrt(max(4 * d * d - 4 * d * a + r * r, 0.0)))
+def _image_path(d, a: float, r: float):
+    """The echo's path off a plane ``d`` from the loudspeaker (metres, or an array of them), the
+    microphone ``r`` from it and ``a`` toward the plane: loudspeaker to its mirror image, to the
+    microphone."""
+    return np.sqrt(np.maximum(4 * d * d - 4 * d * a + r * r, 0.0))
+
+
+def _image_depth(path, a: float, r: float):
+    """:func:`_image_path` solved for the plane's distance: the distance of the plane whose echo's
+    path is ``path`` (metres, or an array of them)."""
+    return (a + np.sqrt(np.maximum(a * a - r * r + path * path, 0.0))) / 2
 
 
 SURFACE_WEIGHTS = (-0.3942, 0.0626, 0.5264, 0.4994, -0.1106, 0.0047)
@@ -542,7 +548,7 @@ def plane_open(audio, fs: int, *, emitted, surface_m, mic_toward_surface_m=None,
         How far the scan's plane may be off, 1 mm to 0.5 m (default 5 cm).
     pose_tolerance_m : float
         How far a pose's distance may be off the others', 0 to ``surface_tolerance_m`` (default
-        :data:`~vrecho.features.POSE_TOLERANCE_M`, 5 mm).
+        :data:`POSE_TOLERANCE_M`, 5 mm).
 
     Returns
     -------
