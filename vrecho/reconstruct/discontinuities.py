@@ -223,24 +223,32 @@ def wall_planes(vertices: np.ndarray, cameras: np.ndarray, *, distance_m: float 
 
     o3d.utility.random.seed(seed)
     rest = np.asarray(vertices, float)
-    # open3d's parallel TSDF extraction orders the same vertices differently run to run; RANSAC
-    # draws by index, so a canonical order makes the walls (and all that follows) repeatable.
+    # RANSAC draws by index, so a canonical order of the vertices makes the walls repeatable
+    # whatever order they come in; and it runs on one thread (the caller's setting restored):
+    # open3d's threads each draw from the one seeded generator, so which planes it finds
+    # depended on their timing and on the machine's cores (a mirror's wall found, or its
+    # phantom room's taken for it, from run to run of one scan).
     rest = rest[np.lexsort(rest.T[::-1])]
     centre = np.asarray(cameras, float).mean(axis=0)
     found = []
-    for _ in range(max_planes):
-        if len(rest) < max(3, min_share * len(vertices)):
-            break
-        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(rest))
-        (a, b, c, d), idx = pcd.segment_plane(distance_m, 3, 1000)
-        if len(idx) < min_share * len(vertices):
-            break
-        n = np.array([a, b, c]) / np.linalg.norm([a, b, c])
-        d = d / np.linalg.norm([a, b, c])
-        if n @ centre + d < 0:  # point the normal at the cameras
-            n, d = -n, -d
-        found.append(Plane(n, float(d), rest[idx]))
-        rest = np.delete(rest, idx, axis=0)
+    threads = o3d.utility.get_max_threads()
+    o3d.utility.set_max_threads(1)
+    try:
+        for _ in range(max_planes):
+            if len(rest) < max(3, min_share * len(vertices)):
+                break
+            pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(rest))
+            (a, b, c, d), idx = pcd.segment_plane(distance_m, 3, 1000)
+            if len(idx) < min_share * len(vertices):
+                break
+            n = np.array([a, b, c]) / np.linalg.norm([a, b, c])
+            d = d / np.linalg.norm([a, b, c])
+            if n @ centre + d < 0:  # point the normal at the cameras
+                n, d = -n, -d
+            found.append(Plane(n, float(d), rest[idx]))
+            rest = np.delete(rest, idx, axis=0)
+    finally:
+        o3d.utility.set_max_threads(threads)
     # RANSAC also strings scattered points (the outdoors, seen in pieces) into planes: a wall is
     # a dense surface, at least a tenth as dense as the densest plane found.
     vertical = [_dense_part(p) for p in found if p.vertical]

@@ -2,7 +2,7 @@
 user's own) and, where the device listened, its recordings (:class:`Echoes`).
 
 :func:`fuse` is open3d's TSDF fusion (``VoxelBlockGrid``; the legacy ``ScalableTSDFVolume``
-returns empty meshes on open3d 0.20); :func:`load_scan` reads a user's scan folder and
+returns empty meshes on open3d 0.20), its mesh in a repeatable order (:func:`canonical`); :func:`load_scan` reads a user's scan folder and
 :meth:`Scan.save` writes one.
 """
 
@@ -148,6 +148,9 @@ def fuse(views: list[View], *, voxel_m: float = 0.03, trunc_voxels: float = 4.0,
     open3d's ``VoxelBlockGrid`` on the CPU, depth in metres read up to
     :data:`~vrecho.camera.DEPTH_MAX_M` (10 m). Frames with no depth reading in range (clear
     glass up close, the sky), and frames whose few readings touch no voxel block, are skipped.
+    open3d's parallel extraction orders the same vertices and triangles differently from run
+    to run; they are put in a canonical order (:func:`canonical`), so that all that follows is
+    repeatable.
 
     Parameters
     ----------
@@ -204,7 +207,37 @@ def fuse(views: list[View], *, voxel_m: float = 0.03, trunc_voxels: float = 4.0,
         grid.integrate(blocks, depth, color, intrinsic, intrinsic, extrinsic, 1.0, DEPTH_MAX_M, trunc_voxels)
     if not used:
         raise VrechoError("fuse: no frame has a depth reading in range")
-    return grid.extract_triangle_mesh(weight_threshold=weight_threshold).to_legacy()
+    return canonical(grid.extract_triangle_mesh(weight_threshold=weight_threshold).to_legacy())
+
+
+def canonical(mesh):
+    """The same triangle mesh in a canonical order: its vertices sorted by x, then y, then z,
+    its triangles by their vertices' new indices (each triangle's own corners as they were: the
+    winding kept). Vertex colours and normals follow their vertices.
+
+    Parameters
+    ----------
+    mesh : open3d.geometry.TriangleMesh
+
+    Returns
+    -------
+    open3d.geometry.TriangleMesh
+        A new mesh.
+    """
+    import open3d as o3d  # heavy (1.2 s to import): only where meshes are made or ray-cast
+
+    v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    order = np.lexsort(v.T[::-1])
+    rank = np.empty(len(v), np.int64)
+    rank[order] = np.arange(len(v))
+    t = rank[t]
+    t = t[np.lexsort(np.sort(t, axis=1).T[::-1])]
+    out = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(v[order]), o3d.utility.Vector3iVector(t.astype(np.int32)))
+    if mesh.has_vertex_colors():
+        out.vertex_colors = o3d.utility.Vector3dVector(np.asarray(mesh.vertex_colors)[order])
+    if mesh.has_vertex_normals():
+        out.vertex_normals = o3d.utility.Vector3dVector(np.asarray(mesh.vertex_normals)[order])
+    return out
 
 
 def load_scan(folder: str | Path, *, voxel_m: float = 0.03, progress: bool = False) -> Scan:
