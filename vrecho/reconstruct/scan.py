@@ -231,7 +231,7 @@ def canonical(mesh):
     rank = np.empty(len(v), np.int64)
     rank[order] = np.arange(len(v))
     t = rank[t]
-    t = t[np.lexsort(np.sort(t, axis=1).T[::-1])]
+    t = t[np.lexsort(np.vstack([t.T[::-1], np.sort(t, axis=1).T[::-1]]))]  # (ties: the same corners, wound otherwise)
     out = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(v[order]), o3d.utility.Vector3iVector(t.astype(np.int32)))
     if mesh.has_vertex_colors():
         out.vertex_colors = o3d.utility.Vector3dVector(np.asarray(mesh.vertex_colors)[order])
