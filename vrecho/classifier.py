@@ -269,7 +269,7 @@ class Classifier:
         key, s, narrow = "A", None, None
         if emitted is not None:
             s = check_emitted(emitted, fs, len(x))
-            narrow = np.broadcast_to(_narrowband(s), (len(x),))
+            narrow = np.broadcast_to(_narrowband_once(s.tobytes()) if s.ndim == 1 else _narrowband(s), (len(x),))
             key = "E"
         if images is not None:
             images = _check_images(images, len(x))
@@ -473,6 +473,12 @@ def _check_images(images, n: int) -> np.ndarray:
     if a.dtype.kind != "f" or not np.all(np.isfinite(a)) or a.min() < 0 or a.max() > 1:
         raise VrechoError("image: expected uint8, or finite floats in [0, 1]")
     return a.astype(np.float32)
+
+
+@functools.lru_cache(maxsize=8)
+def _narrowband_once(sound: bytes) -> bool:
+    """:func:`_narrowband` of a float32 sound, kept: a device repeats its probe."""
+    return bool(_narrowband(np.frombuffer(sound, np.float32)))
 
 
 def _narrowband(s: np.ndarray) -> np.ndarray:
