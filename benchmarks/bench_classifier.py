@@ -1,7 +1,8 @@
 """Latency of the shipped classifier as a user calls it: default thread settings, a fresh process.
 
 Prints a table per machine state, quiet and with another process keeping one core busy (a
-headset app rendering while it listens): for each model the classifier picks, ``predict`` on
+headset app rendering while it listens): for each model the classifier picks, and EchoCNN-E
+with ``surface_m`` (the echo at the plane's distance read too, as the reconstruction asks), ``predict`` on
 one frame (median and 90th percentile of 200 calls, features included) and ``predict_batch``
 on 64 frames (milliseconds per frame, median of 10 calls), each also as a ratio to a reference
 measured beside it in the same state (librosa's own melspectrogram of the same frame, the
@@ -56,7 +57,9 @@ def table(state: str) -> None:
     for label, one, many in (("EchoCNN-A (audio)", {}, {}), ("EchoCNN-AV (audio, image)", {"image": image}, {"images": images}),
                              ("EchoCNN-E (audio, emitted probe)", {"emitted": probe()}, {"emitted": probe()}),
                              ("EchoCNN-EV (audio, image, emitted probe)", {"image": image, "emitted": probe()},
-                              {"images": images, "emitted": probe()})):
+                              {"images": images, "emitted": probe()}),
+                             ("EchoCNN-E + echo at surface_m (the probe, the plane's distance)",
+                              {"emitted": probe(), "surface_m": 1.5}, {"emitted": probe(), "surface_m": 1.5})):
         t1 = _times_ms(lambda: clf.predict(frame, 44100, **one), 200)
         tb = float(np.median(_times_ms(lambda: clf.predict_batch(frames, 44100, **many), 10, per=64)))
         print(f"| {label} | {np.median(t1):.2f} | {np.percentile(t1, 90):.2f} | {np.median(t1) / ref_ms:.2f} "

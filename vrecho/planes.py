@@ -13,6 +13,7 @@ one offset of the plane puts it in all of them.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -224,11 +225,19 @@ def _plane_envelopes(spectrum: np.ndarray, tolerance_m: float):
     ring = int(np.ceil(RING_M / c * FS))
     # one length for every frame, the farthest plane's (a frame's envelope must not depend on its batch)
     n = min(int(np.ceil((2 * (MAX_SURFACE_M + tolerance_m) + 0.3) / c * FS)) + ring + 8, FS)
-    f = np.fft.rfftfreq(FS, 1 / FS)
     gap = int(np.ceil(0.1 / c * FS))  # 10 cm of path kept clear between the window and the ring
-    for b, (lo_hz, hi_hz) in enumerate(PLANE_BANDS_HZ):
-        h = scipy.fft.irfft(spectrum * band_weights(f, lo_hz, hi_hz), FS, axis=-1)[:, :n]
+    for b in range(len(PLANE_BANDS_HZ)):  # (the spectra's own precision: single for frames as predict checks them)
+        h = scipy.fft.irfft(spectrum * _plane_band(b, spectrum.real.dtype.char), FS, axis=-1)[:, :n]
         yield b, np.abs(scipy.signal.hilbert(h, axis=-1)), gap, ring
+
+
+@functools.lru_cache(maxsize=8)
+def _plane_band(b: int, dtype: str) -> np.ndarray:
+    """:func:`~vrecho.features.band_weights` of band ``b`` of :data:`PLANE_BANDS_HZ` over a 1 s
+    frame's bins, as ``dtype``, kept (read-only)."""
+    w = band_weights(np.fft.rfftfreq(FS, 1 / FS), *PLANE_BANDS_HZ[b]).astype(dtype)
+    w.flags.writeable = False
+    return w
 
 
 def _direct(e: np.ndarray) -> tuple[int, float]:
