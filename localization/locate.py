@@ -14,13 +14,13 @@ Two ways, compared side by side in ``benchmarks/bench_localization.py``:
   that source explains it (its weight times the share left unexplained, squared: :data:`LEFT_POWER`),
   and the next map is made, away from the sources found (sources closer than 0.75 m are one to
   this array). Without a given count, a next peak weaker than ``min_strength`` times the first
-  ends the search. Then each source is sought
-  again, the whole grid over, with the others explained (:data:`CYCLES`): the first was placed
-  on a map the others still voted on, where a crossing of two sources' directions or a hum's
-  grating lobes can outvote the truth. A source moves only where the sources together then
-  explain more of the captures' clear votes (:meth:`Votes.explained`). Each position's standard error
-  comes from triangulating each capture's own best direction near it (least squares); the
-  directions reported per capture point at the joint positions.
+  ends the search. Then each source is sought again, the whole grid over, with the others
+  explained (:data:`CYCLES`): the first was placed on a map the others still voted on, where a
+  crossing of two sources' directions or a hum's grating lobes can outvote the truth. A source
+  moves only where the sources together then explain more of the captures' clear votes
+  (:meth:`Votes.explained`). Each position's standard error comes from triangulating each
+  capture's own best direction near it (least squares); the directions reported per capture
+  point at the joint positions.
 
 The strongest peak must stand clear of incoherent noise (:meth:`Votes.null_peak`), or there is
 no source at all; later peaks are judged against it as above (the bound is the whole map's, and
@@ -553,7 +553,7 @@ class Votes:
         (1 - score) ** :data:`LEFT_POWER`, the score toward the grid direction nearest it."""
         u = (point - self.captures[k].center) / np.linalg.norm(point - self.captures[k].center)
         score = self.votes[k][:, int(np.argmax(self.dirs @ u))] ** (1.0 / self.GAMMA)
-        return np.maximum(1.0 - score, 0.0) ** LEFT_POWER
+        return (1.0 - score) ** LEFT_POWER  # (the votes are clipped at 1: so is the score)
 
 
 def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float = 0.1,
@@ -578,8 +578,8 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
         The most sources an estimated count gives, 1 to :data:`MAX_SOURCES` (default 4).
     min_strength : float
         The share of the first source's map peak below which an estimated count stops, 0 to 1
-        (default 0.1: on the tuning walks, seeds 9000 +, 34 % of 80 walks counted right, as 0.25
-        did with the bins' withdrawal before :data:`LEFT_POWER`; 0.04 counts 50 % there, but a
+        (default 0.1: on the tuning walks, seeds 9000 +, 34 % of 80 walks counted right, where
+        0.25 with the bins' withdrawal before :data:`LEFT_POWER` counted 36 %; 0.04 counts 50 %, but a
         lone source's residue reaches 0.075 of it in a small room, and it would be three).
 
     Returns
