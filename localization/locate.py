@@ -11,10 +11,12 @@ Two ways, compared side by side in ``benchmarks/bench_localization.py``:
   of each capture's votes toward it: a true source gathers the votes of every capture, a
   crossing of two captures' directions only theirs. Sources are taken one at a time: the best
   point on a 10 cm grid, refined to a few millimetres; then each bin gives up its vote as far as
-  that source explains it (its weight times the share left unexplained, squared: :data:`LEFT_POWER`),
-  and the next map is made, away from the sources found (sources closer than 0.75 m are one to
-  this array). Without a given count, a next peak weaker than ``min_strength`` times the first
-  ends the search. Then each source is sought again, the whole grid over, with the others
+  that source explains it (its weight times the share left unexplained, squared:
+  :data:`LEFT_POWER`), and the next map is made, away from the sources found (sources closer than
+  0.75 m are one to this array). Without a given count, a next peak weaker than ``min_strength``
+  times the first ends the search, as does one that not every capture hears
+  (:data:`MIN_SUPPORT`): a source raises each capture's map toward it, what a found source left
+  behind or a crossing of some captures' directions only some. Then each source is sought again, the whole grid over, with the others
   explained (:data:`CYCLES`): the first was placed on a map the others still voted on, where a
   crossing of two sources' directions or a hum's grating lobes can outvote the truth. A source
   moves only where the sources together then explain more of the captures' clear votes
@@ -83,6 +85,10 @@ BIN_OVERLAP = 2.0
 overlap by half and neighbouring frequencies leak into each other through the Hann window."""
 ONSET_FRAMES = 3
 ONSET_RATIO = 2.0
+MIN_SUPPORT = 1.35
+"""Without a given count, a next peak whose captures' maps stand, in the geometric mean over
+captures, less than this many times over their own mean toward it (:meth:`Votes.support`) ends
+the search."""
 LEFT_POWER = 2
 """A bin a found source explains to a score s (the share of its power that source's plane wave
 accounts for) keeps (1 - s) ** LEFT_POWER of its vote (:meth:`Votes.explain`). Squared, a bin
@@ -548,6 +554,30 @@ class Votes:
             self.weights[k] *= self._left(k, point)
         self._maps()
 
+    def support(self, point: np.ndarray) -> float:
+        """How far every capture's map toward ``point`` stands over its own mean: the geometric
+        mean over captures (those with a voting bin) of each one's map toward the point over that
+        map's mean, on the votes left. A source raises each capture's map toward it; a found
+        source's residue, or a crossing of some captures' directions, only some.
+
+        Parameters
+        ----------
+        point : numpy.ndarray [shape=(3,)]
+            A world position in metres.
+
+        Returns
+        -------
+        float
+            0 where no capture has a voting bin.
+        """
+        ratios = []
+        for k, c in enumerate(self.captures):
+            mean = float(self.maps[k].mean())
+            if mean > 0:
+                d = point - c.center
+                ratios.append(float(self.lookup(k, (d / np.linalg.norm(d))[None])[0]) / mean)
+        return float(np.exp(np.mean(np.log(np.maximum(ratios, 1e-30))))) if ratios else 0.0
+
     def _left(self, k: int, point: np.ndarray) -> np.ndarray:
         """The share of each of capture ``k``'s bins' votes a source at ``point`` leaves them:
         (1 - score) ** :data:`LEFT_POWER`, the score toward the grid direction nearest it."""
@@ -557,7 +587,7 @@ class Votes:
 
 
 def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float = 0.1,
-           max_sources: int = 4, min_strength: float = 0.1) -> Located:
+           max_sources: int = 4, min_strength: float = 0.04) -> Located:
     """World positions of the sources heard across ``captures`` (see the module's docstring).
 
     Parameters
@@ -578,9 +608,10 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
         The most sources an estimated count gives, 1 to :data:`MAX_SOURCES` (default 4).
     min_strength : float
         The share of the first source's map peak below which an estimated count stops, 0 to 1
-        (default 0.1: on the tuning walks, seeds 9000 +, 34 % of 80 walks counted right, where
-        0.25 with the bins' withdrawal before :data:`LEFT_POWER` counted 36 %; 0.04 counts 50 %, but a
-        lone source's residue reaches 0.075 of it in a small room, and it would be three).
+        (default 0.04: with :data:`MIN_SUPPORT`, 50 % of 80 tuning walks, seeds 9000 +, counted
+        right, against 34 % at 0.1 alone and 36 % at 0.25 before :data:`LEFT_POWER`; a lone
+        voice's residue reaches 0.078 of it in the tests' small room, and only its captures'
+        support, 1.21, keeps it one source).
 
     Returns
     -------
@@ -626,6 +657,8 @@ def locate(captures, n_sources: int | None = None, *, bounds=None, step_m: float
         if not found and len(captures) > 1:
             agreement = float(p[best]) / _turned_peak(votes, grid)
         x = _refine(votes, grid[best], lo, hi, step_m, found)
+        if n_sources is None and found and votes.support(x) < MIN_SUPPORT:
+            break  # not every capture hears it: a found source's residue, or a crossing
         found.append(x)
         strength.append(_claim(votes, x))
     if len(found) >= 2:

@@ -87,7 +87,8 @@ def test_the_demo_runs_the_whole_pipeline_on_the_living_room(tmp_path):
 
     assert not [p for p in usd_export.validate(out / "scene.usdz") if p.severity == "error"]
     stage = Usd.Stage.Open(str(out / "scene.usdz"))
-    assert sum(p.IsA(UsdMedia.SpatialAudio) for p in stage.Traverse()) == len(sources)
+    placed = next(row[1] for row in rows if row[0] == "scene.usdz").split(", ")[1]  # "N spatial-audio sources"
+    assert sum(p.IsA(UsdMedia.SpatialAudio) for p in stage.Traverse()) == int(placed.split()[0]) >= 2
     # The walkthrough as the browser shows it: the room, the alerts, the sources.
     img = _png(out / "walkthrough.png")
     assert _alert_red(img) > 20 and _source_orange(img) > 50
