@@ -60,6 +60,7 @@ from vrecho.errors import VrechoError, check_count, check_number
 from vrecho.signals import SPEED_OF_SOUND
 
 from .capture import FS, MAX_COORD_M, Capture
+from .triangulate import triangulate
 
 BAND_HZ = (200.0, 7000.0)
 NFFT = 512
@@ -297,48 +298,6 @@ def _sphere(n: int) -> np.ndarray:
 AMBIGUOUS_SHARE = 0.9
 """The share of a source's map peak from which another place of the map (nearer to it than to
 any other source found) counts as where it might be (:attr:`Located.uncertainty_axes_m`)."""
-
-
-def triangulate(centers: np.ndarray, directions: np.ndarray, *, axes: bool = False) -> tuple[np.ndarray, float]:
-    """Least-squares point nearest rays ``centers + t * directions``, and its standard error.
-
-    Parameters
-    ----------
-    centers : numpy.ndarray [shape=(n, 3)]
-        The rays' origins in metres.
-    directions : numpy.ndarray [shape=(n, 3)]
-        The rays' unit directions.
-    axes : bool
-        Give the standard error on each of x, y and z (default False: its norm).
-
-    Returns
-    -------
-    x : numpy.ndarray [shape=(3,)]
-        The point in metres.
-    sigma : float or numpy.ndarray [shape=(3,)]
-        Its standard error in metres (on each axis where ``axes``); ``inf`` (unknown) for fewer
-        than three rays, or for rays all parallel (no crossing: ``x`` is then their common line's
-        point nearest the origin).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from localization.locate import triangulate
-    >>> centers = np.array([[0.0, 0, 0], [2.0, 0, 0]])
-    >>> directions = np.array([[1.0, 1, 0], [-1.0, 1, 0]]) / np.sqrt(2)
-    >>> x, sigma = triangulate(centers, directions)
-    >>> x.round(3)
-    array([1., 1., 0.])
-    """
-    P = np.eye(3)[None] - directions[:, :, None] * directions[:, None, :]
-    A = P.sum(axis=0)
-    x = np.linalg.lstsq(A, np.einsum("nij,nj->i", P, centers), rcond=1e-8)[0]
-    if len(centers) < 3 or np.linalg.cond(A) > 1e8:
-        return x, np.full(3, np.inf) if axes else float("inf")
-    resid = np.einsum("nij,nj->ni", P, x - centers)
-    sigma2 = (resid ** 2).sum() / (2 * len(centers) - 3)
-    var = np.diag(np.linalg.inv(A)) * sigma2
-    return x, np.sqrt(np.maximum(var, 0)) if axes else float(np.sqrt(np.maximum(var, 0).sum()))
 
 
 def _pose_direction(votes: "Votes", k: int, x: np.ndarray, sphere: np.ndarray, cone_deg: float = 12.0) -> np.ndarray:
