@@ -16,13 +16,13 @@ Two ways, compared side by side in ``benchmarks/bench_localization.py``:
   0.75 m are one to this array). Without a given count, a next peak weaker than ``min_strength``
   times the first ends the search, as does one that not every capture hears
   (:data:`MIN_SUPPORT`): a source raises each capture's map toward it, what a found source left
-  behind or a crossing of some captures' directions only some. Then each source is sought again, the whole grid over, with the others
-  explained (:data:`CYCLES`): the first was placed on a map the others still voted on, where a
-  crossing of two sources' directions or a hum's grating lobes can outvote the truth. A source
-  moves only where the sources together then explain more of the captures' clear votes
-  (:meth:`Votes.explained`). Each position's standard error comes from triangulating each
-  capture's own best direction near it (least squares); the directions reported per capture
-  point at the joint positions.
+  behind or a crossing of some captures' directions only some. Then each source is sought again,
+  the whole grid over, with the others explained (:data:`CYCLES`): the first was placed on a map
+  the others still voted on, where a crossing of two sources' directions or a hum's grating lobes
+  can outvote the truth. A source moves only where the sources together then explain more of the
+  captures' clear votes (:meth:`Votes.explained`). Each position's standard error comes from
+  triangulating each capture's own best direction near it (least squares); the directions
+  reported per capture point at the joint positions.
 
 The strongest peak must stand clear of incoherent noise (:meth:`Votes.null_peak`), or there is
 no source at all; later peaks are judged against it as above (the bound is the whole map's, and
@@ -490,12 +490,15 @@ class Votes:
         -------
         numpy.ndarray [shape=(N,)]
         """
+        return np.mean(self._toward(points), axis=0)
+
+    def _toward(self, points: np.ndarray) -> np.ndarray:
+        """Each capture's map toward world ``points``: shape (captures, N)."""
         out = []
         for k, c in enumerate(self.captures):
             d = points - c.center
             out.append(self.lookup(k, d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)))
-        out = np.array(out)
-        return np.mean(out, axis=0)
+        return np.array(out)
 
     def explain(self, point: np.ndarray):
         """Withdraw from every bin the share of its vote a source at ``point`` accounts for.
@@ -529,13 +532,12 @@ class Votes:
         float
             0 where no capture has a voting bin.
         """
-        ratios = []
-        for k, c in enumerate(self.captures):
-            mean = float(self.maps[k].mean())
-            if mean > 0:
-                d = point - c.center
-                ratios.append(float(self.lookup(k, (d / np.linalg.norm(d))[None])[0]) / mean)
-        return float(np.exp(np.mean(np.log(np.maximum(ratios, 1e-30))))) if ratios else 0.0
+        means = np.array([m.mean() for m in self.maps])
+        voting = means > 0
+        if not voting.any():
+            return 0.0
+        ratios = self._toward(np.asarray(point, float)[None])[voting, 0] / means[voting]
+        return float(np.exp(np.mean(np.log(np.maximum(ratios, 1e-30)))))
 
     def _left(self, k: int, point: np.ndarray) -> np.ndarray:
         """The share of each of capture ``k``'s bins' votes a source at ``point`` leaves them:
