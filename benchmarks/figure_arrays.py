@@ -13,8 +13,8 @@ at least 0.2 apart (a plane wave's normalised beam power toward the other direct
 most 0.64, its vote, the 8th power, under 3 %), and the share of each kind's power above it:
 what direction alone can act on in a measure weighed by power (SI-SDR), whatever the method.
 And a line per kind: the share of its time-frequency bins that vote in ``localization.locate``
-(its onset rule on the dry sound) and the share of those above 2 kHz: localization counts bins,
-not power.
+(:func:`localization.onsets.onset_bins` on the same dry sound) and the share of those above
+2 kHz: localization counts bins, not power.
 
 Usage: python3 benchmarks/figure_arrays.py [--out docs/arrays_physics.png]
 """
@@ -80,10 +80,10 @@ def main():
     top.grid(alpha=0.3)
     fs = 16_000
     kinds = ("hum", "fan", "music", "speech", "tv")
-    power = {}
+    power, sounds = {}, {}
     for kind in kinds:
-        x = source_sound(kind, 20.0, fs, rng).astype(float)
-        f, p = np.fft.rfftfreq(len(x), 1 / fs), np.abs(np.fft.rfft(x)) ** 2
+        x = sounds[kind] = source_sound(kind, 20.0, fs, rng)
+        f, p = np.fft.rfftfreq(len(x), 1 / fs), np.abs(np.fft.rfft(x.astype(float))) ** 2
         power[kind] = (f, p)
         c = np.cumsum(p) / p.sum()
         bottom.plot(freqs, np.interp(freqs, f, c), label=kind)
@@ -97,16 +97,13 @@ def main():
         print(f"| {name} | {f0:.0f} Hz | " + " | ".join(shares) + " |")
     import importlib
 
+    from localization.onsets import onset_bins
+
     loc = importlib.import_module("localization.locate")
     band = loc.band_bins(fs)
     high = np.fft.rfftfreq(loc.NFFT, 1 / fs)[band] > 2000
-    for kind in kinds:
-        x = source_sound(kind, 20.0, fs, rng).astype(np.float32)
-        e = (np.abs(loc.stft(x[None])[:, band]) ** 2).sum(axis=0)
-        f_ = loc.ONSET_FRAMES
-        before = np.full_like(e, np.inf)
-        before[:, f_:] = np.stack([e[:, f_ - i:e.shape[1] - i] for i in range(1, f_ + 1)]).mean(axis=0)
-        keep = (e > loc.ONSET_RATIO * before) & (e > np.quantile(e, 0.3, axis=1, keepdims=True))
+    for kind, x in sounds.items():
+        keep = onset_bins((np.abs(loc.stft(x.astype(np.float32)[None])[:, band]) ** 2).sum(axis=0))
         print(f"{kind}: {keep.mean():.0%} of its bins vote, {keep[high].sum() / max(keep.sum(), 1):.0%} of those above 2 kHz")
     bottom.set_ylabel("share of the source's power below f")
     bottom.set_xlabel("frequency f (Hz)")

@@ -60,6 +60,7 @@ from vrecho.errors import VrechoError, check_count, check_number
 from vrecho.signals import SPEED_OF_SOUND
 
 from .capture import FS, MAX_COORD_M, Capture
+from .onsets import onset_bins
 from .triangulate import triangulate
 
 BAND_HZ = (200.0, 7000.0)
@@ -84,8 +85,6 @@ SCRAMBLES = 19
 BIN_OVERLAP = 2.0
 """How many onset bins count as one independent draw in the null bound: neighbouring frames
 overlap by half and neighbouring frequencies leak into each other through the Hann window."""
-ONSET_FRAMES = 3
-ONSET_RATIO = 2.0
 MIN_SUPPORT = 1.35
 """Without a given count, a next peak whose captures' maps stand, in the geometric mean over
 captures, less than this many times over their own mean toward it (:meth:`Votes.support`) ends
@@ -313,10 +312,10 @@ class Votes:
     """Each capture's onset time-frequency bins, each voting for the directions that explain it.
 
     A bin's score for a direction is its normalised beam power |a^H x|^2 / (M |x|^2), 1 when one
-    plane wave from there explains the bin exactly. Only onsets vote (a bin at least
-    ``ONSET_RATIO`` times louder than the same frequency over the previous frames): there the
-    direct sound dominates, where a few metres away the room's reverberation dominates the
-    steady state. A bin's vote is its score raised to ``GAMMA``, so a bin where sources mix, or a
+    plane wave from there explains the bin exactly. Only onsets vote
+    (:func:`~localization.onsets.onset_bins`: a bin louder than the same frequency over the
+    previous frames): there the direct sound dominates, where a few metres away the room's
+    reverberation dominates the steady state. A bin's vote is its score raised to ``GAMMA``, so a bin where sources mix, or a
     narrowband bin whose grating lobes are nearly as good as the truth, counts little. A
     capture's direction map is the sum of its bins' votes; the world map at a point is the mean
     over captures of each one's map toward that point.
@@ -356,10 +355,7 @@ class Votes:
             # width and a frame its 32 ms (at 48 kHz NFFT samples were 11 ms and 94 Hz)
             X = stft(c.audio_at(FS))[:, band].astype(np.complex64)  # (M, F, T)
             energy = (np.abs(X) ** 2).sum(axis=0)  # (F, T)
-            before = np.full_like(energy, np.inf)
-            before[:, ONSET_FRAMES:] = np.stack([energy[:, ONSET_FRAMES - i:energy.shape[1] - i]
-                                                 for i in range(1, ONSET_FRAMES + 1)]).mean(axis=0)
-            keep = (energy > ONSET_RATIO * before) & (energy > np.quantile(energy, 0.3, axis=1, keepdims=True))
+            keep = onset_bins(energy)
             delays = self.dirs @ (c.mics - c.center).T / SPEED_OF_SOUND  # (D, M)
             rows = []
             for f in np.flatnonzero(keep.any(axis=1)):
