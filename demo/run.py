@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 from tqdm import tqdm
 
 import localization
@@ -180,24 +181,43 @@ def _repair_row(m: dict) -> tuple:
     return ("repaired scan", "; ".join(said), "the scene's geometry", None)
 
 
-def _source_rows(scene: Scene, placed: list) -> list:
-    rows = []
+def source_rows(scene: Scene, placed: list) -> list:
+    """The summary's rows for the room's sound sources: one per true source and one per placed
+    source that matches none. Each placed source answers for one true source at most (the pairs
+    that lie nearest in all, as the benchmarks match them), so two true sources near one placed
+    source are not both said to be found.
+
+    Parameters
+    ----------
+    scene : Scene
+        Its ``sources`` (each with ``sound`` and ``position``, metres) are the truth.
+    placed : list
+        What :func:`localization.place_sources` placed (each with ``name``, ``position`` and
+        ``confidence``).
+
+    Returns
+    -------
+    list of tuple
+        (decision, what vrecho says, the truth, right: bool).
+    """
     truths = [np.asarray(s.position, float) for s in scene.sources]
-    used = set()
+    d = np.array([[np.linalg.norm(p.position - t) for p in placed] for t in truths]).reshape(len(truths), len(placed))
+    match = dict(zip(*linear_sum_assignment(d)))  # true source -> placed source
+    rows = []
     for k, s in enumerate(scene.sources):
-        if not placed:
-            rows.append((f"source {s.sound}", "not heard", f"at {np.round(truths[k], 2).tolist()} m", False))
+        where = f"at {np.round(truths[k], 2).tolist()} m"
+        if k not in match:
+            said = "not heard" if not placed else (f"not placed ({len(placed)} placed for {len(truths)}; nearest "
+                                                   f"{d[k].min():.2f} m away)")
+            rows.append((f"source {s.sound}", said, where, False))
             continue
-        d = [np.linalg.norm(p.position - truths[k]) for p in placed]
-        j = int(np.argmin(d))
-        used.add(j)
+        j = match[k]
         p = placed[j]
         rows.append((f"source {s.sound}", f"{p.name} at {np.round(p.position, 2).tolist()} m "
-                     f"(confidence {p.confidence:.2f})", f"at {np.round(truths[k], 2).tolist()} m: "
-                     f"{d[j]:.2f} m away", bool(d[j] <= SOURCE_RIGHT_M)))
+                     f"(confidence {p.confidence:.2f})", f"{where}: {d[k, j]:.2f} m away", bool(d[k, j] <= SOURCE_RIGHT_M)))
     for j, p in enumerate(placed):
-        if j not in used:
-            near = min((np.linalg.norm(p.position - t) for t in truths), default=np.inf)
+        if j not in match.values():
+            near = d[:, j].min() if len(truths) else np.inf
             rows.append((f"{p.name}", f"a source at {np.round(p.position, 2).tolist()} m", f"no source there "
                          f"(nearest {near:.2f} m)", False))
     return rows
@@ -432,7 +452,7 @@ def run(out: str | Path = "vrecho-out", *, scene: str | Path | Scene | None = No
             step("sources")
             sim = SceneTruth(scene).captures(rng, n_poses=HEAR_POSES)
             placed = localization.place_sources(sim.captures, bounds=scene.room.box, progress=progress)
-            rows += _source_rows(scene, placed)
+            rows += source_rows(scene, placed)
             done("sources", f"{len(placed)} placed from {len(sim.captures)} captures")
 
         step("headset")

@@ -119,6 +119,29 @@ def test_listen_hears_open_and_closed_surfaces():
     assert max(levels["open"]) < min(levels["glass"] + levels["mirror"]) - 3
 
 
+def test_a_placed_source_answers_for_one_true_source_at_most():
+    from types import SimpleNamespace as S
+
+    from demo.run import source_rows
+
+    # The demo's living room as it came out: the voice's and the brown noise's votes one placed source.
+    scene = S(sources=[S(sound="voice", position=(3.0, 4.25, 1.1)), S(sound="brown_noise", position=(1.0, 3.6, 0.8)),
+                       S(sound="whistle", position=(5.2, 3.4, 0.75))])
+    placed = [S(name="source_0", position=np.array([5.15, 3.39, 0.75]), confidence=0.7),
+              S(name="source_1", position=np.array([1.16, 3.57, 0.91]), confidence=0.2),
+              S(name="source_2", position=np.array([3.0, 1.0, 2.0]), confidence=0.1)]
+    rows = {row[0]: row for row in source_rows(scene, placed[:2])}
+    assert rows["source voice"] == ("source voice", "not placed (2 placed for 3; nearest 1.97 m away)",
+                                    "at [3.0, 4.25, 1.1] m", False)
+    assert rows["source brown_noise"][1].startswith("source_1") and rows["source brown_noise"][3] is True
+    assert rows["source whistle"][1].startswith("source_0") and rows["source whistle"][3] is True
+    assert len(rows) == 3
+    rows = {row[0]: row for row in source_rows(scene, placed)}  # a third one placed: the voice's, 3.4 m off
+    assert rows["source voice"][1].startswith("source_2") and rows["source voice"][3] is False
+    assert rows["source brown_noise"][1].startswith("source_1") and len(rows) == 3
+    assert [row[1] for row in source_rows(scene, [])] == ["not heard"] * 3
+
+
 def test_demo_refuses_a_page_that_is_not_html_before_any_work(tmp_path):
     r = run_cli("demo", "--out", tmp_path / "out", "--html", tmp_path / "page.png", "--no-browser")
     assert r.returncode == 2 and "html" in r.stderr and len(r.stderr.strip().splitlines()) == 1
