@@ -124,7 +124,7 @@ def test_a_placed_source_answers_for_one_true_source_at_most():
 
     from demo.run import source_rows
 
-    # The demo's living room as it came out: the voice's and the brown noise's votes one placed source.
+    # The demo's living room as it came out: one placed source is the nearest to the voice and to the brown noise.
     scene = S(sources=[S(sound="voice", position=(3.0, 4.25, 1.1)), S(sound="brown_noise", position=(1.0, 3.6, 0.8)),
                        S(sound="whistle", position=(5.2, 3.4, 0.75))])
     placed = [S(name="source_0", position=np.array([5.15, 3.39, 0.75]), confidence=0.7),
