@@ -214,7 +214,7 @@ def test_one_plane_for_all_the_frames_of_a_walk(seed, condition, tmp_path):
     ({"surface_m": [1.0, float("nan")]}, "surface_m: expected finite"), ({"surface_m": [1.0, 2.0, 3.0]}, "one per frame"),
     ({"pose_tolerance_m": 0.2}, "pose_tolerance_m"), ({"pose_tolerance_m": -0.001}, "pose_tolerance_m"),
     ({"surface_tolerance_m": 0.0}, "surface_tolerance_m"), ({"mic_toward_surface_m": [0.0, 0.7]}, "mic_toward_surface_m"),
-    ({"emitted": None}, "emitted")])
+    ({"emitted": None}, "emitted: required")])
 def test_bad_walk_is_one_clear_error(living_room_frames, kw, match):
     from vrecho.planes import plane_open
     from vrecho.signals import probe

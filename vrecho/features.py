@@ -141,11 +141,13 @@ def check_emitted(emitted, fs, n_frames: int | None = None) -> np.ndarray:
     Raises
     ------
     VrechoError
-        If ``fs`` is not a valid sample rate, ``emitted`` has another shape or is not numbers,
+        If ``fs`` is not a valid sample rate, ``emitted`` is None, has another shape or is not numbers,
         has NaN or infinite samples, is longer than a 1 s frame, or a sound is silent (all
         zero).
     """
     fs = check_fs(fs)
+    if emitted is None:
+        raise VrechoError("emitted: required here: the sound the device played, at the frames' rate")
     try:
         s = np.asarray(emitted)
     except (ValueError, TypeError):
