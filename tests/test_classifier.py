@@ -112,7 +112,8 @@ def test_a_batch_is_its_frames_one_by_one_and_the_callers_threads_are_restored(c
 
 def test_folded_batch_norms_answer_as_the_saved_models():
     """The shipped models with each batch norm folded into its convolution (_fused, at load)
-    answer as the saved models do, every head, within float32's rounding; none is left."""
+    answer as the saved models do, every head, within float32's rounding, a batch of one too
+    (its dilated convolutions a matrix product); no batch norm is left."""
     from importlib import resources
 
     from vrecho.models import build
@@ -130,8 +131,11 @@ def test_folded_batch_norms_answer_as_the_saved_models():
         assert not any(isinstance(m, (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d)) for m in fused.modules())
         with torch.no_grad():
             a, b = plain.eval()(batch), fused(batch)
+            one = fused({k: v[:1] for k, v in batch.items()})  # a batch of one: OneFrameConv1d's product
         for head in a:
             assert torch.allclose(a[head], b[head], atol=1e-4, rtol=1e-4), (key, head)
+            if head != "depth_at":
+                assert torch.allclose(a[head][:1], one[head], atol=1e-4, rtol=1e-4), (key, head)
 
 
 @pytest.mark.parametrize("audio, fs, match", [

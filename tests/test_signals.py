@@ -89,3 +89,28 @@ def test_random_probes_span_the_product_band():
         level = 10 * np.log10(power / power.max())
         for lo, hi in ((200, 300), (15000, 16000)):  # both ends of 200 Hz to 16 kHz are excited
             assert level[(f >= lo) & (f < hi)].max() > -45
+
+
+def test_coherence_reads_each_recording_of_a_batch_on_its_own():
+    """A pulse scaled explains its window whole (1), noise little; a batch answers as its rows
+    one by one, and a row with samples that are not finite answers 0, not its neighbours'."""
+    from vrecho.signals import analytic_envelope, analytic_filter, coherence
+
+    s = probe()
+    k, rng = s.size, np.random.default_rng(3)
+    x = np.zeros((3, 3 * k))
+    x[0, 500:500 + k] = 0.5 * s  # a pulse, alone
+    x[1] = rng.standard_normal(3 * k)  # noise
+    x[2, 700:700 + k] = 3e3 * s  # a loud pulse (scaled down inside: the ratio is the same)
+    n = 1 << int(np.ceil(np.log2(4 * k)))
+    env = analytic_envelope(x, analytic_filter(s.astype(np.float64), n), n)[:, :2 * k + 1] / np.linalg.norm(s)
+    both = coherence(x, env, k)
+    rows = np.stack([coherence(x[i], env[i], k) for i in range(3)])
+    np.testing.assert_allclose(both, rows)
+    assert both[0].max() > 0.99 and int(np.argmax(both[0])) == 500
+    assert both[1].max() < 0.2
+    assert both[2].max() > 0.99 and int(np.argmax(both[2])) == 700
+    bad = x.copy()
+    bad[1, 10] = np.nan
+    out = coherence(bad, env, k)
+    assert not out[1].any() and np.allclose(out[[0, 2]], both[[0, 2]])

@@ -112,7 +112,8 @@ def check_sounding(x: np.ndarray) -> None:
     VrechoError
         Naming the first silent frame.
     """
-    rms = np.sqrt(np.mean(x.astype(np.float64) ** 2, axis=-1)).reshape(-1)
+    with np.errstate(over="ignore"):  # (single precision, summed pairwise; a square beyond its range: loud, not silent)
+        rms = np.sqrt(np.mean(np.square(x, dtype=np.float32), axis=-1)).reshape(-1)
     if np.any(rms < SILENCE_RMS):
         raise VrechoError(f"audio: frame {int(np.argmax(rms < SILENCE_RMS))} is silent "
                           f"(RMS below {SILENCE_RMS:g}): is the microphone on?")
@@ -277,16 +278,14 @@ def echo_response(audio, emitted, fs: int = FS, *, length_s: float | None = ECHO
     300
     """
     x = check_frames(audio, fs)
-    h = scipy.fft.irfft(response_spectrum(x, check_emitted(emitted, fs, None if x.ndim == 1 else len(x)), regularization),
-                        x.shape[-1])
-    if length_s is not None:
-        h = h[..., :int(round(length_s * FS))]
-    return h.astype(np.float32)
+    h = deconvolve(x, check_emitted(emitted, fs, None if x.ndim == 1 else len(x)), regularization)
+    return h if length_s is None else h[..., :int(round(length_s * FS))]
 
 
-def response_spectrum(x: np.ndarray, s: np.ndarray, regularization: float = 1e-3) -> np.ndarray:
-    """The spectrum of :func:`echo_response`: the frames' spectra times the sounds' Wiener
-    inverse filter.
+def deconvolve(x: np.ndarray, s: np.ndarray, regularization: float = 1e-3) -> np.ndarray:
+    """:func:`echo_response` of checked frames, whole: their spectra times the sounds' Wiener
+    inverse filter, back in time, float32. One deconvolution for every reader of it
+    (:func:`response_features`, :func:`vrecho.planes.plane_echo_from_responses`).
 
     Parameters
     ----------
@@ -299,14 +298,16 @@ def response_spectrum(x: np.ndarray, s: np.ndarray, regularization: float = 1e-3
 
     Returns
     -------
-    numpy.ndarray, shape (..., n // 2 + 1), complex
+    numpy.ndarray, shape (..., n), float32
     """
     n = x.shape[-1]
     if s.ndim == 1:  # one sound for every frame: its inverse filter, cached (a device repeats its probe)
         G = _cached_inverse_filter(s.tobytes(), n, regularization)
     else:
         G = _inverse_filter(s, n, regularization)
-    return scipy.fft.rfft(x, n) * G
+    X = scipy.fft.rfft(x, n)
+    np.multiply(X, G, out=X)
+    return scipy.fft.irfft(X, n, overwrite_x=True).astype(np.float32, copy=False)
 
 
 def _inverse_filter(s: np.ndarray, n: int, regularization: float) -> np.ndarray:
@@ -365,26 +366,22 @@ def echo_features(audio, emitted, fs: int = FS) -> EchoFeatures:
         For frames :func:`check_frames` refuses or sounds :func:`check_emitted` refuses.
     """
     x = check_frames(audio, fs)
-    return spectrum_features(response_spectrum(x, check_emitted(emitted, fs, None if x.ndim == 1 else len(x))),
-                             x.shape[-1])
+    return response_features(deconvolve(x, check_emitted(emitted, fs, None if x.ndim == 1 else len(x))))
 
 
-def spectrum_features(spectrum: np.ndarray, n: int) -> EchoFeatures:
-    """:func:`echo_features` of response spectra: for a caller that reads more of one
-    deconvolution (:func:`vrecho.planes.plane_echo_from_spectra`), computed once.
+def response_features(h: np.ndarray) -> EchoFeatures:
+    """:func:`echo_features` of impulse responses, :func:`deconvolve`'s: for a caller that reads
+    more of one deconvolution (:func:`vrecho.planes.plane_echo_from_responses`).
 
     Parameters
     ----------
-    spectrum : numpy.ndarray, shape (..., n // 2 + 1), complex
-        :func:`response_spectrum` of the frames.
-    n : int
-        The frames' length in samples.
+    h : numpy.ndarray, shape (..., n), float32
+        The frames' whole responses (n >= 0.5 s at 44.1 kHz).
 
     Returns
     -------
     EchoFeatures
     """
-    h = scipy.fft.irfft(spectrum, n).astype(np.float32)  # echo_response's, whole
     return EchoFeatures(_direct_one(h[..., :int(round(ECHO_WINDOW_S * FS))]), _decay_bands(h))
 
 

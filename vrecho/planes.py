@@ -24,7 +24,7 @@ from scipy.special import expit
 
 from .errors import VrechoError, check_number
 from .errors import check_per_frame
-from .features import band_weights, check_emitted, check_frames, check_sounding, response_spectrum
+from .features import band_weights, check_emitted, check_frames, check_sounding, deconvolve
 from .signals import FS, SPEED_OF_SOUND, parabolic_peaks
 
 PLANE_TOLERANCE_M = 0.05
@@ -175,17 +175,17 @@ def plane_echo(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
     x = x.reshape(-1, x.shape[-1])
     d = check_surface(surface_m, len(x))
     toward = None if mic_toward_m is None else check_mic_toward(mic_toward_m, len(x))
-    return plane_echo_from_spectra(response_spectrum(x, check_emitted(emitted, fs, len(x))), d, tolerance_m, toward)
+    return plane_echo_from_responses(deconvolve(x, check_emitted(emitted, fs, len(x))), d, tolerance_m, toward)
 
 
-def plane_echo_from_spectra(spectrum: np.ndarray, d: np.ndarray, tolerance_m: float, toward: np.ndarray | None
-                            ) -> PlaneEcho:
-    """:func:`plane_echo` of response spectra: for a caller that reads more of one deconvolution.
+def plane_echo_from_responses(h: np.ndarray, d: np.ndarray, tolerance_m: float, toward: np.ndarray | None
+                              ) -> PlaneEcho:
+    """:func:`plane_echo` of impulse responses: for a caller that reads more of one deconvolution.
 
     Parameters
     ----------
-    spectrum : numpy.ndarray, shape (B, bins), complex
-        :func:`vrecho.features.response_spectrum` of checked frames.
+    h : numpy.ndarray, shape (B, n), float
+        :func:`vrecho.features.deconvolve` of checked frames: their whole responses.
     d : numpy.ndarray, shape (B,)
         Their distances to the plane, :func:`check_surface` took.
     tolerance_m : float
@@ -199,7 +199,7 @@ def plane_echo_from_spectra(spectrum: np.ndarray, d: np.ndarray, tolerance_m: fl
     """
     c = SPEED_OF_SOUND
     features, depth = np.empty((len(d), 3 * len(PLANE_BANDS_HZ))), np.empty(len(d))
-    for b, env, gap, ring in _plane_envelopes(spectrum, tolerance_m):
+    for b, env, gap, ring in _plane_envelopes(h, tolerance_m):
         for i, e in enumerate(env):
             t0, r = _direct(e)
             a = None if toward is None else float(np.clip(toward[i], -r, r))
@@ -217,27 +217,43 @@ def plane_echo_from_spectra(spectrum: np.ndarray, d: np.ndarray, tolerance_m: fl
     return PlaneEcho(features, depth)
 
 
-def _plane_envelopes(spectrum: np.ndarray, tolerance_m: float):
-    """For each band of :data:`PLANE_BANDS_HZ`: its index, the envelopes (B, n) of the responses
-    of the spectra (B, bins) as far as the farthest plane's ring, and the gap and the ring (in
-    samples) that :func:`_ring` keeps around a window."""
+def _plane_envelopes(h: np.ndarray, tolerance_m: float):
+    """For each band of :data:`PLANE_BANDS_HZ`: its index, the envelopes (B, n) of the whole
+    responses ``h`` (B, 1 s) in the band as far as the farthest plane's ring, and the gap and the
+    ring (in samples) that :func:`_ring` keeps around a window."""
     c = SPEED_OF_SOUND
     ring = int(np.ceil(RING_M / c * FS))
     # one length for every frame, the farthest plane's (a frame's envelope must not depend on its batch)
     n = min(int(np.ceil((2 * (MAX_SURFACE_M + tolerance_m) + 0.3) / c * FS)) + ring + 8, FS)
     gap = int(np.ceil(0.1 / c * FS))  # 10 cm of path kept clear between the window and the ring
-    for b in range(len(PLANE_BANDS_HZ)):  # (the spectra's own precision: single for frames as predict checks them)
-        h = scipy.fft.irfft(spectrum * _plane_band(b, spectrum.real.dtype.char), FS, axis=-1)[:, :n]
-        yield b, np.abs(scipy.signal.hilbert(h, axis=-1)), gap, ring
+    half = PLANE_KERNEL_HALF
+    m = scipy.fft.next_fast_len(n + 4 * half, real=True)
+    # the response's last samples, then its first: a whole second's band response is circular
+    ends = np.concatenate([h[:, h.shape[-1] - half:], h[:, :n + half]], axis=-1)
+    spectrum = scipy.fft.rfft(ends, m, axis=-1)
+    for b in range(len(PLANE_BANDS_HZ)):  # (the responses' own precision: single for frames as predict checks them)
+        y = scipy.fft.irfft(spectrum * _plane_kernel(b, m, h.dtype.char), m, axis=-1)[:, 2 * half:2 * half + n]
+        yield b, np.abs(scipy.signal.hilbert(y, axis=-1)), gap, ring
+
+
+PLANE_KERNEL_HALF = 1024
+"""Samples on either side of its centre that a band of :data:`PLANE_BANDS_HZ` is filtered with: the
+response of :func:`~vrecho.features.band_weights` over a 1 s frame's bins falls as 1 / t^3, every
+tap past these under 4.4e-7 of the peak (-127 dB), so a band's response over the first 2 760
+samples takes FFTs of 6 860 points, not of the whole second (the plane's envelopes 0.46 -> 0.2 ms a
+frame)."""
 
 
 @functools.lru_cache(maxsize=8)
-def _plane_band(b: int, dtype: str) -> np.ndarray:
-    """:func:`~vrecho.features.band_weights` of band ``b`` of :data:`PLANE_BANDS_HZ` over a 1 s
-    frame's bins, as ``dtype``, kept (read-only)."""
-    w = band_weights(np.fft.rfftfreq(FS, 1 / FS), *PLANE_BANDS_HZ[b]).astype(dtype)
-    w.flags.writeable = False
-    return w
+def _plane_kernel(b: int, m: int, dtype: str) -> np.ndarray:
+    """The spectrum (``m`` points, ``dtype``'s precision) of band ``b`` of :data:`PLANE_BANDS_HZ`
+    as a 1 s frame's bins weigh it (:func:`~vrecho.features.band_weights`), its taps cut to
+    :data:`PLANE_KERNEL_HALF` either side of the centre, kept (read-only)."""
+    taps = np.fft.irfft(band_weights(np.fft.rfftfreq(FS, 1 / FS), *PLANE_BANDS_HZ[b]), FS)
+    half = PLANE_KERNEL_HALF
+    k = scipy.fft.rfft(np.roll(taps, half)[:2 * half + 1].astype(dtype), m)
+    k.flags.writeable = False
+    return k
 
 
 def _direct(e: np.ndarray) -> tuple[int, float]:
@@ -356,13 +372,13 @@ def plane_walk(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
     if not (np.isfinite(pose_tolerance_m) and 0 <= pose_tolerance_m <= tolerance_m):
         raise VrechoError(f"pose_tolerance_m: expected 0 to the plane's tolerance ({tolerance_m:g} m), "
                           f"got {pose_tolerance_m!r}")
-    spectrum = response_spectrum(x, check_emitted(emitted, fs, len(x)))
+    h = deconvolve(x, check_emitted(emitted, fs, len(x)))
     c = SPEED_OF_SOUND
     offsets = np.round(np.arange(-tolerance_m, tolerance_m + 5e-4, 0.001), 6)
     w = max(1, int(round(2 * pose_tolerance_m / c * FS)))  # samples of path either side
     features = np.empty((len(x), len(offsets), 3 * len(PLANE_BANDS_HZ)))
     depth = np.empty((len(x), len(offsets)))
-    for b, env, gap, ring in _plane_envelopes(spectrum, tolerance_m):
+    for b, env, gap, ring in _plane_envelopes(h, tolerance_m):
         top = scipy.ndimage.maximum_filter1d(env, 2 * w + 1, axis=-1)
         for i, e in enumerate(env):
             t0, r = _direct(e)

@@ -388,9 +388,9 @@ def coherence(x: np.ndarray, env: np.ndarray, k: int) -> np.ndarray:
 
     Parameters
     ----------
-    x : numpy.ndarray [shape=(n,)], float64
-        The recording.
-    env : numpy.ndarray [shape=(n - k + 1,)]
+    x : numpy.ndarray [shape=(..., n)], float64
+        The recording, or several (each read on its own).
+    env : numpy.ndarray [shape=(..., n - k + 1)]
         Its envelope correlated with the pulse (:func:`analytic_envelope`), divided by the
         pulse's norm: entry ``l`` for the window from sample ``l``.
     k : int
@@ -398,18 +398,21 @@ def coherence(x: np.ndarray, env: np.ndarray, k: int) -> np.ndarray:
 
     Returns
     -------
-    numpy.ndarray [shape=(n - k + 1,)], float64
-        0 where the window is silent.
+    numpy.ndarray [shape=(..., n - k + 1)], float64
+        0 where the window is silent, and for a recording with samples that are not finite.
     """
-    peak = float(np.max(np.abs(x), initial=0.0))
-    if not np.isfinite(peak):
-        return np.zeros(env.size)
-    scale = 1.0 / peak if peak > 1.0 else 1.0  # a ratio: samples near float64's range would overflow squared
-    c = np.concatenate([[0.0], np.cumsum((x * scale) ** 2)])
-    energy = np.sqrt(np.maximum(c[k:k + env.size] - c[:env.size], 0.0))
+    x = np.asarray(x, np.float64)
+    m = env.shape[-1]
+    peak = np.max(np.abs(x), axis=-1, keepdims=True, initial=0.0)
+    finite = np.isfinite(peak)
+    scale = 1.0 / np.where(finite & (peak > 1.0), peak, 1.0)  # a ratio: samples near float64's range would overflow squared
+    c = np.cumsum((np.where(finite, x, 0.0) * scale) ** 2, axis=-1)
+    c = np.concatenate([np.zeros(c.shape[:-1] + (1,)), c], axis=-1)
+    energy = np.sqrt(np.maximum(c[..., k:k + m] - c[..., :m], 0.0))
+    top = np.maximum(energy.max(axis=-1, keepdims=True, initial=0.0), 1e-300)
     with np.errstate(over="ignore", invalid="ignore"):
-        return np.divide(env * scale, energy, out=np.zeros(env.size),
-                         where=(energy > 1e-12 * max(float(energy.max()), 1e-300)) & np.isfinite(env))
+        return np.divide(env * scale, energy, out=np.zeros(energy.shape),
+                         where=(energy > 1e-12 * top) & np.isfinite(env) & finite)
 
 
 def parabolic_peaks(y: np.ndarray, i: np.ndarray) -> np.ndarray:
