@@ -131,7 +131,7 @@ def test_folded_batch_norms_answer_as_the_saved_models():
         assert not any(isinstance(m, (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d)) for m in fused.modules())
         with torch.no_grad():
             a, b = plain.eval()(batch), fused(batch)
-            one = fused({k: v[:1] for k, v in batch.items()})  # a batch of one: OneFrameConv1d's product
+            one = fused({k: v[:1] for k, v in batch.items()})  # a batch of one: FastConv1d's matrix product
         for head in a:
             assert torch.allclose(a[head], b[head], atol=1e-4, rtol=1e-4), (key, head)
             if head != "depth_at":

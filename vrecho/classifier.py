@@ -576,17 +576,30 @@ def _fused(model: torch.nn.Module) -> torch.nn.Module:
             elif isinstance(conv, torch.nn.ModuleList) and isinstance(norm, torch.nn.ModuleList):
                 for i, (c, n) in enumerate(zip(conv, norm)):
                     if isinstance(c, convs) and isinstance(n, norms):
-                        conv[i], norm[i] = OneFrameConv1d(fuse_conv_bn_eval(c, n)), torch.nn.Identity()
+                        conv[i], norm[i] = FastConv1d(fuse_conv_bn_eval(c, n)), torch.nn.Identity()
     return model
 
 
-class OneFrameConv1d(torch.nn.Module):
-    """A stride-1 ``Conv1d`` (its output as long as its input) that answers a batch of one
-    frame as one matrix product of its shifted inputs, and larger batches as the convolution
-    does. torch leaves oneDNN for a 1-D convolution of one frame and runs a dilated one in a
-    loop: EchoCNN's 24-channel convolutions over 661 steps took 0.17 ms each so, 0.10 ms as a
-    product (one thread, this 2-core machine); from two frames on, oneDNN's is the faster (0.09
-    against 0.14 ms a frame). The same answers within float32's rounding (1e-6).
+class FastConv1d(torch.nn.Module):
+    """A stride-1 ``Conv1d`` (its output as long as its input) run the faster way torch has for
+    the shapes EchoCNN gives it (24 channels, 661 steps, dilated), the same answers within
+    float32's rounding (4e-7 of the largest). One thread, this 2-core machine, the six dilated
+    convolutions of EchoCNN-E's echo branch with their residual sums, ms a frame (2026-12-06):
+
+    ============  ===========  ===============================  ===============================
+    frames        ``Conv1d``   one matrix product of the        2-D, channels last
+                               shifted inputs
+    ============  ===========  ===============================  ===============================
+    1             1.05         0.58                             0.96
+    8             0.58         0.59                             0.49
+    32            0.67         0.67                             0.53
+    ============  ===========  ===============================  ===============================
+
+    A batch of one frame is one matrix product (torch runs a 1-D convolution of one frame outside
+    oneDNN, a dilated one in a loop); larger batches a 2-D convolution over channels-last
+    memory (oneDNN's fastest layout for few channels). Its output keeps that layout, so the
+    residual sum that adds to it (:class:`vrecho.models.EchoBranch`) hands the next one its
+    input without a copy.
 
     Parameters
     ----------
@@ -597,9 +610,10 @@ class OneFrameConv1d(torch.nn.Module):
     def __init__(self, conv: torch.nn.Conv1d):
         super().__init__()
         self.conv = conv
+        w = conv.weight.detach()
         # (out, taps x in), tap-major: the order of the shifted inputs stacked below
-        self.register_buffer("weight", conv.weight.detach().permute(0, 2, 1).reshape(conv.out_channels, -1).contiguous(),
-                             persistent=False)
+        self.register_buffer("taps", w.permute(0, 2, 1).reshape(conv.out_channels, -1).contiguous(), persistent=False)
+        self.register_buffer("plane", w[:, :, None, :].contiguous(memory_format=torch.channels_last), persistent=False)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """The convolution of ``x``.
@@ -613,11 +627,12 @@ class OneFrameConv1d(torch.nn.Module):
         torch.Tensor, shape (B, out, n), float32
         """
         c = self.conv
-        if x.shape[0] != 1:
-            return c(x)
-        n, k, pad = x.shape[-1], c.kernel_size[0], c.padding[0]
-        shifted = torch.nn.functional.pad(x[0], (pad, pad)).unfold(1, n, c.dilation[0])[:, :k]  # (in, taps, n)
-        return torch.addmm(c.bias[:, None], self.weight, shifted.transpose(0, 1).reshape(-1, n))[None]
+        n, k, pad, d = x.shape[-1], c.kernel_size[0], c.padding[0], c.dilation[0]
+        if x.shape[0] == 1:
+            shifted = torch.nn.functional.pad(x[0], (pad, pad)).unfold(1, n, d)[:, :k]  # (in, taps, n)
+            return torch.addmm(c.bias[:, None], self.taps, shifted.transpose(0, 1).reshape(-1, n))[None]
+        x = x.unsqueeze(2).contiguous(memory_format=torch.channels_last)  # (a no-op for this one's output)
+        return torch.nn.functional.conv2d(x, self.plane, c.bias, padding=(0, pad), dilation=(1, d)).squeeze(2)
 
 
 def _load(saved: dict) -> Classifier:

@@ -185,9 +185,9 @@ class EchoBranch(nn.Module):
         x = torch.log10(envelope.clamp_min(1e-4))[:, None] / 4.0  # 80 dB of range to [-1, 0]
         h = F.relu(self.stem(x))
         for conv, norm in zip(self.convs, self.norms):
-            h = h + F.relu(norm(conv(h)))
+            h = F.relu(norm(conv(h)), inplace=True) + h  # (a sum keeps its first term's memory layout: classifier.FastConv1d's passes on)
         n = self.depth_at.shape[0]
-        h = h[..., :n]
+        h = h[..., :n].contiguous()  # (what follows reduces over steps: fastest with them adjacent)
         level_at = F.max_pool1d(x, 2)[:, 0, :n]
         scores = (self.score(h)[:, 0] + self.sharpness * level_at).masked_fill(~self.valid, -1e4)
         # The echo: the best-scoring delay, refined to a fraction of a step by a soft-argmax over

@@ -240,7 +240,7 @@ PLANE_KERNEL_HALF = 1024
 """Samples on either side of its centre that a band of :data:`PLANE_BANDS_HZ` is filtered with: the
 response of :func:`~vrecho.features.band_weights` over a 1 s frame's bins falls as 1 / t^3, every
 tap past these under 4.4e-7 of the peak (-127 dB), so a band's response over the first 2 760
-samples takes FFTs of 6 860 points, not of the whole second (the plane's envelopes 0.46 -> 0.2 ms a
+samples takes FFTs of 6 860 points, not of the whole second (the plane's envelopes 0.5 to 0.7 -> 0.2 ms a
 frame)."""
 
 
