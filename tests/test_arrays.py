@@ -48,6 +48,31 @@ def test_envelope_walks_are_what_their_condition_says(condition):
         assert all(np.mean(np.abs(s.signal) < 1e-9) > 0.2 for s in talker)
 
 
+def test_polygon_rooms_reverberate_within_the_envelope():
+    """PROTOCOL.md's rooms reverberate 0.2 to 1.0 s: every polygon room's materials are drawn for
+    it (Eyring's time within the range asked), and the simulator's own decay of one, image
+    sources and ray tracing (pyroomacoustics), lies within the envelope too."""
+    from pyroomacoustics.experimental import measure_rt60
+
+    from vrecho.scene import Scene
+    from vrecho.sim.acoustics import Simulation, impulse_responses
+    from vrecho.sim.arrays import eyring_rt60, polygon_room
+
+    rng = np.random.default_rng(3)
+    times = [eyring_rt60(polygon_room(rng)) for _ in range(50)]
+    assert 0.2 <= min(times) and max(times) <= 0.8
+    assert all(0.2 <= eyring_rt60(polygon_room(rng, (0.2, 1.0))) <= 1.0 for _ in range(20))
+    with pytest.raises(VrechoError, match="reverberation time of 0.05 to 0.1 s"):
+        polygon_room(rng, (0.05, 0.1), tries=5)
+    room = polygon_room(np.random.default_rng(1))
+    lo, hi = room.footprint.min(axis=0), room.footprint.max(axis=0)
+    points = np.c_[rng.uniform(lo, hi, (200, 2)), np.full(200, 1.5)]
+    points = points[room.contains(points, margin_m=0.3)]
+    source, mic = points[0], points[np.argmax(np.linalg.norm(points - points[0], axis=1))]
+    h = impulse_responses(Scene("t", room), source, mic, 16_000, sim=Simulation(length_s=1.5), cache=False)[0]
+    assert 0.2 <= measure_rt60(h, 16_000, decay_db=20) <= 1.0
+
+
 def test_unknown_condition_is_one_error():
     from vrecho.sim.arrays import envelope_walk
 
