@@ -340,11 +340,17 @@ def _array_share(ref, rank: int, workers: int):
             x_val, y_val)
 
 
+DRIVER_GRACE_S = 30.0
+"""How long an interrupted command waits for Ray Train's driver thread to end once Ray is shut down."""
+
+
 def _in_thread(call: Callable):
     """``call()`` in a thread of its own, the main thread waiting: Ray Train installs its own
     Ctrl-C handler (for good, exiting with status 1 and no word) only when it runs in the main
     thread; here Ctrl-C stays vrecho's (one line, status 130), and the workers end with this
-    driver (a local cluster with it, a remote one's job as it disconnects)."""
+    driver (a local cluster with it, a remote one's job as it disconnects). Interrupted, it shuts
+    Ray down and waits up to :data:`DRIVER_GRACE_S` for the thread to end before it passes the
+    interrupt on."""
     box = {}
 
     def run():
@@ -355,8 +361,13 @@ def _in_thread(call: Callable):
 
     thread = threading.Thread(target=run, name="ray-train-driver", daemon=True)
     thread.start()
-    while thread.is_alive():
-        thread.join(0.2)
+    try:
+        while thread.is_alive():
+            thread.join(0.2)
+    except BaseException:  # Ctrl-C: Ray shut down, and its driver thread let end before the interpreter does
+        disconnect()  # (a daemon thread still in Ray's C++ core as Python finalizes can take the process
+        thread.join(DRIVER_GRACE_S)  # down with it: a run of CI ended so, SIGSEGV in place of status 130)
+        raise
     if "error" in box:
         raise box["error"]
     return box["result"]
