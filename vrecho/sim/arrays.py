@@ -204,11 +204,11 @@ def polygon_room(rng: np.random.Generator, rt60_s: tuple[float, float] = (0.2, 0
     else:  # two corners cut
         c = rng.uniform(0.15, 0.3, 4) * [lx, ly, lx, ly]
         fp = [(c[0], 0), (lx, 0), (lx, ly - c[3]), (lx - c[2], ly), (0, ly), (0, c[1])]
-    height = round(float(rng.uniform(2.4, 3.0)), 3)
+    fp, height = np.round(np.array(fp, float), 3), round(float(rng.uniform(2.4, 3.0)), 3)
     for _ in range(tries):
         scat = float(rng.uniform(0.05, 0.3))
         walls = [Material.from_database(str(rng.choice(WALL_MATERIALS)), scattering=scat) for _ in fp]
-        room = Room(np.round(np.array(fp, float), 3), height, walls,
+        room = Room(fp, height, walls,
                     Material.from_database(str(rng.choice(FLOOR_MATERIALS)), scattering=scat),
                     Material.from_database(str(rng.choice(CEILING_MATERIALS)), scattering=scat))
         if rt60_s[0] <= eyring_rt60(room) <= rt60_s[1]:
@@ -335,8 +335,7 @@ def envelope_walk(rng: np.random.Generator, condition: str = "envelope", *, cach
     for _ in range(tries):
         if polygon:
             room = Scene("envelope", polygon_room(rng, (0.2, 1.0) if every else (0.2, 0.8)))
-            fp = room.room.footprint
-            lo, hi = np.r_[fp.min(axis=0), 0.0], np.r_[fp.max(axis=0), room.room.height_m]
+            lo, hi = room.room.box
             inside = room.room.contains
             poses = _walk(rng, inside, lo, hi, n_poses, turn, array)
         else:  # random_walk's room and arc, the head turned further where the condition turns it
