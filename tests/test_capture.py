@@ -96,10 +96,12 @@ def test_the_shipped_pulse_train_is_the_probe_once_a_second_and_loops():
 @pytest.mark.parametrize("codec, ext", [("flac", "mkv"), ("aac", "mp4")])
 def test_a_video_round_trip_gives_the_simulated_frames_answers(ir, tmp_path, codec, ext):
     """The simulator's capture muxed into a real video (PyAV); `vrecho capture` reads it back and
-    answers as EchoCNN does on the simulated recording's frames passed directly."""
+    answers as EchoCNN does on the frames of the sound the file holds, found where the simulated
+    recording's own pulses are; FLAC's sound is the recording's (the same answers as its frames
+    passed directly), AAC's (what phones write) keeps each echo's delay."""
     import csv
 
-    from vrecho.capture import cut_frames, find_onsets, write_video
+    from vrecho.capture import cut_frames, find_onsets, read_video, write_video
     from vrecho.sim.captures import simulate_recording
     from vrecho.classifier import load_classifier
     from vrecho.cli import main
@@ -118,21 +120,27 @@ def test_a_video_round_trip_gives_the_simulated_frames_answers(ir, tmp_path, cod
     write_video(video, gray, 10, x, 44100, audio_codec=codec)
     assert main(["capture", str(video), "--out", str(tmp_path / "out")]) == 0
     rows = list(csv.DictReader(open(tmp_path / "out" / "frames.csv")))
+    clf = load_classifier()
     direct = find_onsets(x, 44100)
-    expected = load_classifier().predict_batch(cut_frames(x, direct), 44100, images=None, emitted=probe())
-    assert len(rows) == len(expected) >= 3  # the same frames found
-    for r, t, p in zip(rows, direct.seconds, expected):
+    expected = clf.predict_batch(cut_frames(x, direct), 44100, images=None, emitted=probe())
+    y, fs, _ = read_video(video)
+    heard = clf.predict_batch(cut_frames(y, find_onsets(y, fs)), fs, images=None, emitted=probe())
+    assert len(rows) == len(expected) == len(heard) >= 3  # the same frames found
+    moved = []
+    for r, t, p, q in zip(rows, direct.seconds, expected, heard):
         assert abs(float(r["time_s"]) - t) < 1 / 44100
-        # FLAC is lossless: the same answer; AAC (what phones write) moves it (EchoCNN-E's open
-        # probability by up to 0.15 here), so a probability near a coin's (audio alone cannot tell
-        # glass from a mirror) may come out either side
-        tol = 0.001 if codec == "flac" else 0.25
-        assert abs(float(r["p_open"]) - p.probabilities["open"]) < tol
-        assert abs(float(r["p_mirror"]) - p.probabilities["mirror"]) < tol
-        assert (r["open"] == "True") == p.is_open
-        if not p.is_open and abs(p.probabilities["mirror"] - 0.5) > tol:
-            assert r["material"] == p.material
-        assert abs(float(r["depth_m"]) - p.depth_m) < (0.001 if codec == "flac" else 0.03)
+        assert abs(float(r["p_open"]) - q.probabilities["open"]) < 1e-3
+        assert abs(float(r["p_mirror"]) - q.probabilities["mirror"]) < 1e-3
+        assert (r["open"] == "True") == q.is_open and abs(float(r["depth_m"]) - q.depth_m) < 1e-3
+        if codec == "flac":  # lossless
+            assert abs(q.probabilities["open"] - p.probabilities["open"]) < 1e-3 and q.is_open == p.is_open
+            assert abs(q.depth_m - p.depth_m) < 1e-3
+        elif not (p.is_open or q.is_open):
+            moved.append(abs(q.depth_m - p.depth_m))
+    # AAC moves EchoCNN's probabilities (the AAC rows in the Results), and now and then its pick
+    # of the echo (the shipped EchoCNN-E: 3 frames of 20 of this room's, 2026-12-06); most
+    # frames keep the surface's echo
+    assert codec == "flac" or (len(moved) >= 3 and np.median(moved) < 0.03)
     images = np.load(tmp_path / "out" / "images.npz")["gray"]
     assert images.shape == (len(rows), 120, 160) and abs(images.mean() - gray.mean()) < 3
 

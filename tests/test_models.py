@@ -41,6 +41,17 @@ def test_echo_branch_reads_depth_from_the_echo_delay():
     assert torch.allclose(out["depth_m"], depths, atol=0.06)
 
 
+def test_the_echo_branch_width_is_stored_and_older_bundles_load_at_24():
+    from vrecho.models import build
+
+    narrow = EchoCNN(("echo",), echo_channels=16)
+    assert narrow.branches["echo"].score.in_channels == 16
+    again = build(narrow.config)
+    again.load_state_dict(narrow.state_dict())  # fails on any shape that differs
+    older = {k: v for k, v in narrow.config.items() if k != "echo_channels"}  # bundles before the key
+    assert build(older).branches["echo"].score.in_channels == 24
+
+
 def test_the_paper_audio_network_is_small():
     # one conv layer, two dense layers: well under a million weights
     assert sum(p.numel() for p in EchoCNN(("mel",)).parameters()) < 1_000_000

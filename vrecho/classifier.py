@@ -588,7 +588,7 @@ def _fused(model: torch.nn.Module) -> torch.nn.Module:
 
 class FastConv1d(torch.nn.Module):
     """A stride-1 ``Conv1d`` (its output as long as its input) run the faster way torch has for
-    the shapes EchoCNN gives it (24 channels, 661 steps, dilated), the same answers within
+    the shapes EchoCNN gives it (16 or 24 channels, 661 steps, dilated), the same answers within
     float32's rounding (4e-7 of the largest). One thread, this 2-core machine, the six dilated
     convolutions of EchoCNN-E's echo branch with their residual sums, ms a frame (2026-12-06):
 

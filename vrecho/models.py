@@ -324,6 +324,8 @@ class EchoCNN(nn.Module):
         Dropout probability before and after the shared dense layer; 0.3 by default.
     wave_layers : {5, 8}
         Depth of the SoundNet branch; 8 by default.
+    echo_channels : int
+        Channels of the echo branch's convolutions (:class:`EchoBranch`); 24 by default.
 
     Attributes
     ----------
@@ -345,7 +347,7 @@ class EchoCNN(nn.Module):
     """
 
     def __init__(self, inputs: tuple[str, ...] = ("mel",), *, fusion: str = "concat", hidden: int = 128,
-                 dropout: float = 0.3, wave_layers: int = 8):
+                 dropout: float = 0.3, wave_layers: int = 8, echo_channels: int = 24):
         super().__init__()
         if not inputs or not set(inputs) <= set(INPUTS) or {"echo", "self"} <= set(inputs):
             raise ValueError(f"inputs: expected some of {', '.join(INPUTS)} (not both echo and self); got {inputs!r}")
@@ -353,13 +355,13 @@ class EchoCNN(nn.Module):
             raise ValueError(f"fusion: expected concat or mfb, got {fusion!r}")
         self.inputs, self.fusion = tuple(inputs), fusion
         self.config = {"inputs": list(inputs), "fusion": fusion, "hidden": hidden, "dropout": dropout,
-                       "wave_layers": wave_layers}
+                       "wave_layers": wave_layers, "echo_channels": echo_channels}
         self.branches = nn.ModuleDict()
         if "mel" in inputs:
             self.branches["mel"] = AudioBranch(hidden=hidden)
         for name in ("echo", "self"):
             if name in inputs:
-                self.branches[name] = EchoBranch(hidden=hidden)
+                self.branches[name] = EchoBranch(hidden=hidden, channels=echo_channels)
         if "wave" in inputs:
             self.branches["wave"] = SoundNetBranch(n_layers=wave_layers, hidden=hidden)
         if "image" in inputs:
@@ -435,7 +437,7 @@ def build(config: dict) -> EchoCNN:
     ----------
     config : dict
         :attr:`EchoCNN.config`: ``inputs``, ``fusion``, ``hidden``, ``dropout`` and, optionally,
-        ``wave_layers`` (8 when absent).
+        ``wave_layers`` (8 when absent) and ``echo_channels`` (24 when absent).
 
     Returns
     -------
@@ -443,7 +445,7 @@ def build(config: dict) -> EchoCNN:
         A new model with fresh weights (load a state dict into it).
     """
     return EchoCNN(tuple(config["inputs"]), fusion=config["fusion"], hidden=config["hidden"], dropout=config["dropout"],
-                   wave_layers=config.get("wave_layers", 8))
+                   wave_layers=config.get("wave_layers", 8), echo_channels=config.get("echo_channels", 24))
 
 
 class FeatureBaseline:

@@ -58,6 +58,8 @@ class Method:
     wave_layers : {5, 8}
     max_epochs : int, optional
         A cap below the run's epochs (the slow raw-waveform baselines).
+    echo_channels : int
+        Channels of the echo branch's convolutions (:class:`~vrecho.models.EchoBranch`).
     """
 
     name: str
@@ -67,6 +69,7 @@ class Method:
     fusion: str = "concat"
     wave_layers: int = 8
     max_epochs: int | None = None  # a cap below the run's epochs (the slow raw-waveform baselines)
+    echo_channels: int = 24
 
     @property
     def slug(self) -> str:
@@ -74,13 +77,14 @@ class Method:
         return "".join(c if c.isalnum() else "_" for c in self.name.lower()).strip("_")
 
     def model(self) -> EchoCNN:
-        """A new, untrained EchoCNN of this method's inputs, fusion and SoundNet depth.
+        """A new, untrained EchoCNN of this method's inputs, fusion, SoundNet depth and echo
+        branch's width.
 
         Returns
         -------
         EchoCNN
         """
-        return EchoCNN(self.inputs, fusion=self.fusion, wave_layers=self.wave_layers)
+        return EchoCNN(self.inputs, fusion=self.fusion, wave_layers=self.wave_layers, echo_channels=self.echo_channels)
 
     def path(self, run) -> Path:
         """Where a run folder keeps this method's trained model.
@@ -108,8 +112,8 @@ METHODS = (
     Method("visual only", "cnn", ("image",)),
     Method("EchoCNN-A self-ref", "cnn", ("self",)),
     Method("EchoCNN-AV self-ref", "cnn", ("self", "image")),
-    Method("EchoCNN-E", "cnn", ("echo",), protocol="product"),
-    Method("EchoCNN-EV", "cnn", ("echo", "image"), protocol="product"),
+    Method("EchoCNN-E", "cnn", ("echo",), protocol="product", echo_channels=16),
+    Method("EchoCNN-EV", "cnn", ("echo", "image"), protocol="product", echo_channels=16),
     Method("kNN (echo)", "knn", ("envelope", "bands"), protocol="product"),
 )
 SHIPPED = {"A": "EchoCNN-A", "AV": "EchoCNN-AV concat", "E": "EchoCNN-E", "EV": "EchoCNN-EV"}
