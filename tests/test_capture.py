@@ -98,7 +98,7 @@ def test_a_video_round_trip_gives_the_simulated_frames_answers(ir, tmp_path, cod
     """The simulator's capture muxed into a real video (PyAV); `vrecho capture` reads it back and
     answers as EchoCNN does on the frames of the sound the file holds, found where the simulated
     recording's own pulses are; FLAC's sound is the recording's (the same answers as its frames
-    passed directly), AAC's (what phones write) keeps each echo's delay."""
+    passed directly), AAC's (what phones write) the surface's echo in most frames."""
     import csv
 
     from vrecho.capture import cut_frames, find_onsets, read_video, write_video
