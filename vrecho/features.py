@@ -90,9 +90,28 @@ def _window() -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=1)
-def _mel_basis() -> np.ndarray:
-    """librosa's mel filters, (STFT bins, mel bands) float32 (built once: 2 ms a call)."""
-    return np.ascontiguousarray(librosa.filters.mel(sr=FS, n_fft=N_FFT, n_mels=N_MELS, fmax=FS / 2).T, np.float32)
+def _mel_blocks() -> tuple[tuple[int, int, int, int, np.ndarray], ...]:
+    """librosa's mel filters (STFT bins by mel bands, float32, built once: 2 ms a call) as
+    :data:`_MEL_BLOCKS` blocks of bins, each with only the bands it feeds: (first and last bin
+    times two, first and last band, the block's weights with each row twice, one for a bin's
+    real part squared and one for its imaginary part's). A band's triangle spans a few bins
+    low and some hundred high: 3 % of the dense matrix's weights are not zero, and the blocks
+    hold 15 % of it (one thread, this 2-core machine: the product 0.15 -> 0.04 ms a frame, the
+    same sums in another order, 2e-7 of the largest apart)."""
+    basis = librosa.filters.mel(sr=FS, n_fft=N_FFT, n_mels=N_MELS, fmax=FS / 2).T.astype(np.float32)
+    used = basis > 0
+    count = np.cumsum(used.sum(axis=1))  # blocks of equal weights
+    edges = [0, *np.searchsorted(count, np.linspace(0, count[-1], _MEL_BLOCKS + 1)[1:-1]), len(basis)]
+    blocks = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        bands = np.flatnonzero(used[a:b].any(axis=0))
+        if b > a and len(bands):
+            c, d = int(bands[0]), int(bands[-1]) + 1
+            blocks.append((2 * a, 2 * b, c, d, np.ascontiguousarray(np.repeat(basis[a:b, c:d], 2, axis=0))))
+    return tuple(blocks)
+
+
+_MEL_BLOCKS = 8
 
 
 SILENCE_RMS = 1e-6
@@ -215,9 +234,11 @@ def _pooled_db(x: np.ndarray) -> np.ndarray:
     rounding) in two thirds of the time, which is most of a prediction's budget."""
     padded = np.pad(x, [(0, 0), (N_FFT // 2, N_FFT // 2)])
     frames = np.lib.stride_tricks.sliding_window_view(padded, N_FFT, axis=-1)[..., ::HOP, :]
-    spectrum = scipy.fft.rfft(frames * _window(), axis=-1).view(np.float32)
-    power = spectrum[..., 0::2] ** 2 + spectrum[..., 1::2] ** 2
-    db = 10 * np.log10(np.maximum(power @ _mel_basis(), 1e-10))  # (B, STFT frames, mel bands)
+    squares = np.square(scipy.fft.rfft(frames * _window(), axis=-1).view(np.float32))  # real, imaginary, ...
+    mel = np.zeros((*squares.shape[:-1], N_MELS), np.float32)
+    for a, b, c, d, weights in _mel_blocks():  # the power of each bin (its two squares) into its bands
+        mel[..., c:d] += squares[..., a:b] @ weights
+    db = 10 * np.log10(np.maximum(mel, 1e-10))  # (B, STFT frames, mel bands)
     starts, counts = _time_bins(db.shape[-2])
     return (np.add.reduceat(db, starts, axis=-2) / counts[:, None]).transpose(0, 2, 1)
 
