@@ -199,22 +199,62 @@ def plane_echo_from_responses(h: np.ndarray, d: np.ndarray, tolerance_m: float, 
     """
     c = SPEED_OF_SOUND
     features, depth = np.empty((len(d), 3 * len(PLANE_BANDS_HZ))), np.empty(len(d))
-    for b, env, gap, ring in _plane_envelopes(h, tolerance_m):
-        for i, e in enumerate(env):
-            t0, r = _direct(e)
-            a = None if toward is None else float(np.clip(toward[i], -r, r))
-            near, far = plane_window_m(d[i], r, tolerance_m, a)
-            lo = max(int(np.floor(near / c * FS)), t0 + gap)
-            hi = max(int(np.ceil(far / c * FS)), lo + 1)
-            prior = _window_prior(lo, hi, near, far, 2 * d[i] if a is None else _image_path(d[i], a, r))
-            p = lo + int(np.argmax(e[lo:hi + 1] * prior))
-            peak = e[p] * prior[p - lo]
-            path = c * float(parabolic_peaks(e, (p,))[0]) / FS
-            features[i, 3 * b:3 * b + 3] = _plane_db(peak, _ring(e, lo, hi, t0, gap, ring), e[t0], path, r)
-            if b == 0:
-                a = 0.0 if a is None else a
-                depth[i] = _image_depth(path, a, r)
+    rows = np.arange(len(d))[:, None]
+    for b, env, gap, ring in _plane_envelopes(h, tolerance_m):  # every frame at once: plane_echo's loop, in arrays
+        t0 = np.argmax(env[:, :int(0.002 * FS)], axis=1)
+        r = c * t0 / FS
+        if toward is None:  # (plane_window_m's arithmetic, frame by frame)
+            a = np.zeros(len(d))
+            near, far, centre = 2 * (d - tolerance_m) - r, 2 * (d + tolerance_m) + r, 2 * d
+        else:
+            a = np.clip(toward, -r, r)
+            near, far = (_image_path(np.maximum(d + k * tolerance_m, a / 2), a, r) for k in (-1, 1))
+            centre = _image_path(d, a, r)
+        lo = np.maximum(np.floor(near / c * FS).astype(int), t0 + gap)
+        hi = np.maximum(np.ceil(far / c * FS).astype(int), lo + 1)
+        at = lo[:, None] + np.arange(int((hi - lo).max()) + 1)  # each frame's window, padded past its end
+        inside = at <= hi[:, None]
+        at = np.minimum(at, hi[:, None])
+        prior = np.exp(-0.5 * ((c * at / FS - centre[:, None]) / np.maximum((far - near) / 2, 1e-3)[:, None]) ** 2)
+        weighed = np.where(inside, env[rows, at] * prior, -np.inf)
+        k = np.argmax(weighed, axis=1)
+        p = lo + k
+        peak = weighed[rows[:, 0], k]
+        path = c * _parabolic(env, p) / FS
+        # the ring around the window: ``ring`` samples either side, ``gap`` away (none within gap of the direct sound)
+        start = np.maximum(lo - gap - ring, t0 + gap)
+        before = np.arange(ring)[None] + start[:, None]
+        around = np.concatenate([np.where(before < np.maximum(lo - gap, t0 + gap)[:, None], env[rows, before], np.inf),
+                                 env[rows, (hi + gap)[:, None] + np.arange(ring)]], axis=1)
+        features[:, 3 * b:3 * b + 3] = _plane_db_rows(peak, around, env[rows[:, 0], t0], path, r)
+        if b == 0:
+            depth[:] = _image_depth(path, a, r)
     return PlaneEcho(features, depth)
+
+
+def _parabolic(env: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """:func:`~vrecho.signals.parabolic_peaks` of one peak ``p[i]`` in each row of ``env`` (B, n),
+    its arithmetic in double precision as there."""
+    rows = np.arange(len(p))
+    inner = (p > 0) & (p < env.shape[1] - 1)
+    a, b, c = (env[rows, np.clip(p + k, 0, env.shape[1] - 1)].astype(float) for k in (-1, 0, 1))
+    den = a - 2 * b + c
+    bend = inner & (den < 0)
+    return np.where(bend, p + 0.5 * (a - c) / np.where(bend, den, -1.0), p.astype(float))
+
+
+def _plane_db_rows(peak: np.ndarray, around: np.ndarray, direct: np.ndarray, path: np.ndarray, r: np.ndarray
+                   ) -> np.ndarray:
+    """:func:`_plane_db` of one echo per row: ``around`` (B, k) padded with infinity where a
+    row's ring is cut short (by the direct sound), its median and maximum taken over the rest."""
+    ordered = np.sort(around, axis=1)
+    count = np.isfinite(around).sum(axis=1)
+    rows = np.arange(len(peak))
+    middle = (ordered[rows, (count - 1) // 2] + ordered[rows, count // 2]) / 2  # (numpy's median: their mean)
+    top = ordered[rows, count - 1].astype(float)
+    return 20 * np.log10(np.maximum(np.stack(
+        [peak / np.maximum(middle.astype(float), 1e-300), peak / np.maximum(top, 1e-300),
+         peak / np.maximum(direct.astype(float), 1e-300) * path / np.maximum(r, 0.01)], axis=-1), 1e-300))
 
 
 def _plane_envelopes(h: np.ndarray, tolerance_m: float):
