@@ -27,7 +27,7 @@ import scipy.signal
 
 from .device import MIC_ABOVE_EMITTER_M
 from .errors import VrechoError, check_float32
-from .signals import FS, SPEED_OF_SOUND, check_fs
+from .signals import FS, SPEED_OF_SOUND, check_fs, hilbert_envelope
 
 N_FFT = 2048
 HOP = 512
@@ -409,7 +409,7 @@ def response_features(h: np.ndarray) -> EchoFeatures:
 def _direct_one(early: np.ndarray) -> np.ndarray:
     """Hilbert envelope of the first 30 ms of responses (..., 1323), divided by its direct-sound
     peak (the largest value in the first 2 ms), float32."""
-    env = np.abs(scipy.signal.hilbert(early, axis=-1))
+    env = hilbert_envelope(early)
     peak = env[..., :int(0.002 * FS)].max(axis=-1, keepdims=True)
     return (env / np.maximum(peak, 1e-12)).astype(np.float32)
 

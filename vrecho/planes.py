@@ -19,13 +19,12 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.fft
 import scipy.ndimage
-import scipy.signal
 from scipy.special import expit
 
 from .errors import VrechoError, check_number
 from .errors import check_per_frame
 from .features import band_weights, check_emitted, check_frames, check_sounding, deconvolve
-from .signals import FS, SPEED_OF_SOUND, parabolic_peaks
+from .signals import FS, SPEED_OF_SOUND, hilbert_envelope, parabolic_peaks
 
 PLANE_TOLERANCE_M = 0.05
 """How far the given distance to a surface's plane may be off (a scan's or a depth camera's
@@ -232,12 +231,15 @@ def plane_echo_from_responses(h: np.ndarray, d: np.ndarray, tolerance_m: float, 
     return PlaneEcho(features, depth)
 
 
+_STEPS = np.array([-1, 0, 1])
+
+
 def _parabolic(env: np.ndarray, p: np.ndarray) -> np.ndarray:
     """:func:`~vrecho.signals.parabolic_peaks` of one peak ``p[i]`` in each row of ``env`` (B, n),
     its arithmetic in double precision as there."""
-    rows = np.arange(len(p))
     inner = (p > 0) & (p < env.shape[1] - 1)
-    a, b, c = (env[rows, np.clip(p + k, 0, env.shape[1] - 1)].astype(float) for k in (-1, 0, 1))
+    three = env[np.arange(len(p))[:, None], np.minimum(np.maximum(p[:, None] + _STEPS, 0), env.shape[1] - 1)]
+    a, b, c = three.astype(float).T
     den = a - 2 * b + c
     bend = inner & (den < 0)
     return np.where(bend, p + 0.5 * (a - c) / np.where(bend, den, -1.0), p.astype(float))
@@ -273,7 +275,7 @@ def _plane_envelopes(h: np.ndarray, tolerance_m: float):
     spectrum = scipy.fft.rfft(ends, m, axis=-1)
     for b in range(len(PLANE_BANDS_HZ)):  # (the responses' own precision: single for frames as predict checks them)
         y = scipy.fft.irfft(spectrum * _plane_kernel(b, m, h.dtype.char), m, axis=-1)[:, 2 * half:2 * half + n]
-        yield b, np.abs(scipy.signal.hilbert(y, axis=-1)), gap, ring
+        yield b, hilbert_envelope(y), gap, ring
 
 
 PLANE_KERNEL_HALF = 1024
