@@ -6,8 +6,11 @@ with ``surface_m`` (the echo at the plane's distance read too, as the reconstruc
 one frame (median and 90th percentile of 200 calls, features included) and ``predict_batch``
 on 64 frames (milliseconds per frame, median of 10 calls), each also as a ratio to a reference
 measured beside it in the same state (librosa's own melspectrogram of the same frame, the
-paper's front end, at the same default settings). Run: ``python3 benchmarks/bench_classifier.py``.
-Nothing here sets threads: whatever the library sets, it sets for itself.
+paper's front end, at the same default settings). The calls are made in :data:`PASSES` passes,
+each pass every model and the reference in turn: the machine's speed drifts over seconds, and
+the models take their turns through the same seconds. Run:
+``python3 benchmarks/bench_classifier.py``. Nothing here sets threads: whatever the library
+sets, it sets for itself.
 """
 
 from __future__ import annotations
@@ -23,14 +26,18 @@ def _spin() -> None:
         pass
 
 
-def _times_ms(fn, repeats: int, per: int = 1) -> np.ndarray:
-    fn()
+PASSES = 5
+"""The passes a table's calls are made in (each pass: 40 ``predict`` calls and 2 ``predict_batch``
+calls of every model, 40 reference calls)."""
+
+
+def _times_ms(fn, repeats: int, per: int = 1) -> list[float]:
     out = []
     for _ in range(repeats):
         t = time.perf_counter()
         fn()
-        out.append((time.perf_counter() - t) / per)
-    return 1000 * np.array(out)
+        out.append(1000 * (time.perf_counter() - t) / per)
+    return out
 
 
 def table(state: str) -> None:
@@ -48,22 +55,32 @@ def table(state: str) -> None:
     image = crop(World(scene), pose)
     frames, images = np.stack([frame] * 64), np.stack([image] * 64)
     clf = vrecho.load_classifier()
-    ref = _times_ms(lambda: librosa.feature.melspectrogram(y=frame, sr=44100, n_fft=2048, hop_length=512, n_mels=62), 200)
+    mel = lambda: librosa.feature.melspectrogram(y=frame, sr=44100, n_fft=2048, hop_length=512, n_mels=62)
+    rows = (("EchoCNN-A (audio)", {}, {}), ("EchoCNN-AV (audio, image)", {"image": image}, {"images": images}),
+            ("EchoCNN-E (audio, emitted probe)", {"emitted": probe()}, {"emitted": probe()}),
+            ("EchoCNN-EV (audio, image, emitted probe)", {"image": image, "emitted": probe()},
+             {"images": images, "emitted": probe()}),
+            ("EchoCNN-E + echo at surface_m (the probe, the plane's distance)",
+             {"emitted": probe(), "surface_m": 1.5}, {"emitted": probe(), "surface_m": 1.5}))
+    mel()
+    for _, one, many in rows:  # warm: each model's first calls
+        clf.predict(frame, 44100, **one)
+        clf.predict_batch(frames, 44100, **many)
+    ref, t1, tb = [], {r[0]: [] for r in rows}, {r[0]: [] for r in rows}
+    for _ in range(PASSES):
+        ref += _times_ms(mel, 200 // PASSES)
+        for label, one, many in rows:
+            t1[label] += _times_ms(lambda: clf.predict(frame, 44100, **one), 200 // PASSES)
+            tb[label] += _times_ms(lambda: clf.predict_batch(frames, 44100, **many), 10 // PASSES, per=64)
     ref_ms = float(np.median(ref))
     print(f"\n{state}: reference (librosa melspectrogram of one frame) median {ref_ms:.2f} ms, "
           f"90th percentile {np.percentile(ref, 90):.2f} ms\n")
     print("| model | predict: median ms | 90th pct ms | x reference | predict_batch (64): ms per frame | x reference |")
     print("|:---|---:|---:|---:|---:|---:|")
-    for label, one, many in (("EchoCNN-A (audio)", {}, {}), ("EchoCNN-AV (audio, image)", {"image": image}, {"images": images}),
-                             ("EchoCNN-E (audio, emitted probe)", {"emitted": probe()}, {"emitted": probe()}),
-                             ("EchoCNN-EV (audio, image, emitted probe)", {"image": image, "emitted": probe()},
-                              {"images": images, "emitted": probe()}),
-                             ("EchoCNN-E + echo at surface_m (the probe, the plane's distance)",
-                              {"emitted": probe(), "surface_m": 1.5}, {"emitted": probe(), "surface_m": 1.5})):
-        t1 = _times_ms(lambda: clf.predict(frame, 44100, **one), 200)
-        tb = float(np.median(_times_ms(lambda: clf.predict_batch(frames, 44100, **many), 10, per=64)))
-        print(f"| {label} | {np.median(t1):.2f} | {np.percentile(t1, 90):.2f} | {np.median(t1) / ref_ms:.2f} "
-              f"| {tb:.2f} | {tb / ref_ms:.2f} |", flush=True)
+    for label, _, _ in rows:
+        one, many = float(np.median(t1[label])), float(np.median(tb[label]))
+        print(f"| {label} | {one:.2f} | {np.percentile(t1[label], 90):.2f} | {one / ref_ms:.2f} "
+              f"| {many:.2f} | {many / ref_ms:.2f} |", flush=True)
 
 
 def main() -> None:
