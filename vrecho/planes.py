@@ -214,8 +214,7 @@ def plane_echo_from_responses(h: np.ndarray, d: np.ndarray, tolerance_m: float, 
         at = lo[:, None] + np.arange(int((hi - lo).max()) + 1)  # each frame's window, padded past its end
         inside = at <= hi[:, None]
         at = np.minimum(at, hi[:, None])
-        prior = np.exp(-0.5 * ((c * at / FS - centre[:, None]) / np.maximum((far - near) / 2, 1e-3)[:, None]) ** 2)
-        weighed = np.where(inside, env[rows, at] * prior, -np.inf)
+        weighed = np.where(inside, env[rows, at] * _window_prior(at, near, far, centre), -np.inf)
         k = np.argmax(weighed, axis=1)
         p = lo + k
         peak = weighed[rows[:, 0], k]
@@ -253,10 +252,7 @@ def _plane_db_rows(peak: np.ndarray, around: np.ndarray, direct: np.ndarray, pat
     count = np.isfinite(around).sum(axis=1)
     rows = np.arange(len(peak))
     middle = (ordered[rows, (count - 1) // 2] + ordered[rows, count // 2]) / 2  # (numpy's median: their mean)
-    top = ordered[rows, count - 1].astype(float)
-    return 20 * np.log10(np.maximum(np.stack(
-        [peak / np.maximum(middle.astype(float), 1e-300), peak / np.maximum(top, 1e-300),
-         peak / np.maximum(direct.astype(float), 1e-300) * path / np.maximum(r, 0.01)], axis=-1), 1e-300))
+    return _db_over(peak, middle, ordered[rows, count - 1], direct, path, r)
 
 
 def _plane_envelopes(h: np.ndarray, tolerance_m: float):
@@ -316,10 +312,17 @@ def _plane_db(peak, around: np.ndarray, direct: float, path, r: float) -> np.nda
     the paths ``path``, metres): over the median of the echoes ``around``, over their strongest,
     and over the ``direct`` sound with spherical spreading undone (the microphone ``r`` metres
     from the loudspeaker), in dB; the last axis the three."""
+    return _db_over(peak, np.median(around), around.max(), direct, path, r)
+
+
+def _db_over(peak, middle, top, direct, path, r) -> np.ndarray:
+    """:func:`_plane_db`'s three features of ``peak`` (arrays broadcast together) from the median
+    and the strongest of the echoes around it."""
     peak = np.asarray(peak, float)
     return 20 * np.log10(np.maximum(np.stack(
-        [peak / max(float(np.median(around)), 1e-300), peak / max(float(around.max()), 1e-300),
-         peak / max(float(direct), 1e-300) * np.asarray(path, float) / max(r, 0.01)], axis=-1), 1e-300))
+        [peak / np.maximum(np.asarray(middle, float), 1e-300), peak / np.maximum(np.asarray(top, float), 1e-300),
+         peak / np.maximum(np.asarray(direct, float), 1e-300) * np.asarray(path, float) / np.maximum(r, 0.01)],
+        axis=-1), 1e-300))
 
 
 POSE_TOLERANCE_M = 0.005
@@ -437,16 +440,16 @@ def plane_walk(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
     return PlaneWalk(features, offsets, depth)
 
 
-def _window_prior(lo: int, hi: int, near: float, far: float, centre: float) -> np.ndarray:
-    """How likely the plane's echo is at each sample ``lo`` to ``hi`` of its window ``near`` to
-    ``far`` (metres of path; peak 1): a normal centred where it falls with the plane exactly
-    where given (``centre``: 2 d where the microphone's direction is unknown, for a device's
-    microphone sits mostly beside its loudspeaker, not ahead of it), its deviation half the
-    window. A room's other echo near the window's edge then counts for less than one where the
-    scan puts the plane (on the tuning frames: 83.3 -> 86.0 % in cross-validation of the broad
-    band's features alone)."""
-    path = SPEED_OF_SOUND * np.arange(lo, hi + 1) / FS
-    return np.exp(-0.5 * ((path - centre) / max((far - near) / 2, 1e-3)) ** 2)
+def _window_prior(at: np.ndarray, near: np.ndarray, far: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """How likely the plane's echo is at the samples ``at`` (B, k) of each frame's window
+    ``near`` to ``far`` (B,; metres of path; peak 1): a normal centred where it falls with the
+    plane exactly where given (``centre``: 2 d where the microphone's direction is unknown, for
+    a device's microphone sits mostly beside its loudspeaker, not ahead of it), its deviation
+    half the window. A room's other echo near the window's edge then counts for less than one
+    where the scan puts the plane (on the tuning frames: 83.3 -> 86.0 % in cross-validation of
+    the broad band's features alone)."""
+    path = SPEED_OF_SOUND * at / FS
+    return np.exp(-0.5 * ((path - centre[:, None]) / np.maximum((far - near) / 2, 1e-3)[:, None]) ** 2)
 
 
 def plane_window_m(d: float, r: float, tolerance_m: float = PLANE_TOLERANCE_M, mic_toward_m: float | None = None
