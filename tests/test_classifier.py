@@ -138,6 +138,26 @@ def test_folded_batch_norms_answer_as_the_saved_models():
                 assert torch.allclose(a[head][:1], one[head], atol=1e-4, rtol=1e-4), (key, head)
 
 
+def test_the_open_temperature_divides_the_open_logits_only(living_room_frames):
+    """A model's ``open_temperature`` (fitted after training on other devices' frames) softens
+    or sharpens its open probability, not its answer, and nothing else it says."""
+    from vrecho.classifier import Classifier
+    from vrecho.models import EchoCNN
+
+    from vrecho.signals import probe
+
+    frame = living_room_frames[0][0]
+    torch.manual_seed(0)
+    model = EchoCNN(("echo",), echo_channels=16).eval()
+    hot = EchoCNN(("echo",), echo_channels=16, open_temperature=2.0).eval()
+    hot.load_state_dict(model.state_dict())
+    a, b = (Classifier({"E": m}).predict(frame, 44100, emitted=probe()) for m in (model, hot))
+    logit = lambda p: np.log(p / (1 - p))
+    assert np.isclose(logit(b.probabilities["open"]), logit(a.probabilities["open"]) / 2, rtol=1e-4)
+    assert a.is_open == b.is_open and a.depth_m == b.depth_m and a.probabilities["mirror"] == b.probabilities["mirror"]
+    assert vrecho.load_classifier().models["E"].config["open_temperature"] > 1  # the shipped one: fitted, overconfident
+
+
 @pytest.mark.parametrize("audio, fs, match", [
     (np.zeros(1000), 44100, "44100 samples"),
     (np.full(44100, np.nan), 44100, "NaN"),
@@ -459,7 +479,8 @@ def test_echocnn_e_trains_on_other_devices_and_ships_into_a_bundle(tiny_dataset,
                 "--devices", data, "--base", resources.files("vrecho.assets") / "echocnn.pt", "--quiet")
     assert r.returncode == 0, r.stderr
     assert "with 27 device frames" in r.stdout
-    assert json.loads((run / "training.json").read_text())["EchoCNN-E"]["device_frames"] == [27, 3]
+    record = json.loads((run / "training.json").read_text())["EchoCNN-E"]
+    assert record["device_frames"] == [27, 3] and 0.2 <= record["open_temperature"] <= 5  # fitted on their validation frames
     assert json.loads((run / "run.json").read_text())["devices"] == {"seed": 5, "n_frames": 30}
     shipped = torch.load(resources.files("vrecho.assets") / "echocnn.pt", weights_only=True)["models"]
     mine = torch.load(run / "classifier.pt", weights_only=True)["models"]

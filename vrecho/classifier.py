@@ -347,7 +347,8 @@ def _answer(model, x: np.ndarray, raw: np.ndarray, s: np.ndarray | None, images:
         batch["mel"] = torch.as_tensor(logmel(x, FS))
     with torch.no_grad():
         y = model(batch)
-    out.update(open=torch.softmax(y["open"], 1)[:, 1].numpy(), mirror=torch.softmax(y["material"], 1)[:, 1].numpy(),
+    out.update(open=torch.softmax(y["open"] / model.config.get("open_temperature", 1.0), 1)[:, 1].numpy(),
+               mirror=torch.softmax(y["material"], 1)[:, 1].numpy(),
                depth_bin=torch.softmax(y["depth_bin"], 1).numpy(), depth_m=y["depth_m"].numpy(),
                src_m=y["src_m"].numpy())
     if surface is not None:

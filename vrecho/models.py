@@ -326,6 +326,11 @@ class EchoCNN(nn.Module):
         Depth of the SoundNet branch; 8 by default.
     echo_channels : int
         Channels of the echo branch's convolutions (:class:`EchoBranch`); 24 by default.
+    open_temperature : float
+        What the open/closed head's logits are divided by when the classifier answers
+        (:mod:`vrecho.classifier`; training and :meth:`forward` never use it): 1 as trained, a
+        temperature fitted after training where frames of other devices say the head is over-
+        or underconfident (:func:`vrecho.learn.devices.open_temperature`); 1 by default.
 
     Attributes
     ----------
@@ -347,7 +352,7 @@ class EchoCNN(nn.Module):
     """
 
     def __init__(self, inputs: tuple[str, ...] = ("mel",), *, fusion: str = "concat", hidden: int = 128,
-                 dropout: float = 0.3, wave_layers: int = 8, echo_channels: int = 24):
+                 dropout: float = 0.3, wave_layers: int = 8, echo_channels: int = 24, open_temperature: float = 1.0):
         super().__init__()
         if not inputs or not set(inputs) <= set(INPUTS) or {"echo", "self"} <= set(inputs):
             raise ValueError(f"inputs: expected some of {', '.join(INPUTS)} (not both echo and self); got {inputs!r}")
@@ -355,7 +360,7 @@ class EchoCNN(nn.Module):
             raise ValueError(f"fusion: expected concat or mfb, got {fusion!r}")
         self.inputs, self.fusion = tuple(inputs), fusion
         self.config = {"inputs": list(inputs), "fusion": fusion, "hidden": hidden, "dropout": dropout,
-                       "wave_layers": wave_layers, "echo_channels": echo_channels}
+                       "wave_layers": wave_layers, "echo_channels": echo_channels, "open_temperature": open_temperature}
         self.branches = nn.ModuleDict()
         if "mel" in inputs:
             self.branches["mel"] = AudioBranch(hidden=hidden)
@@ -437,7 +442,8 @@ def build(config: dict) -> EchoCNN:
     ----------
     config : dict
         :attr:`EchoCNN.config`: ``inputs``, ``fusion``, ``hidden``, ``dropout`` and, optionally,
-        ``wave_layers`` (8 when absent) and ``echo_channels`` (24 when absent).
+        ``wave_layers`` (8 when absent), ``echo_channels`` (24 when absent) and
+        ``open_temperature`` (1 when absent).
 
     Returns
     -------
@@ -445,7 +451,8 @@ def build(config: dict) -> EchoCNN:
         A new model with fresh weights (load a state dict into it).
     """
     return EchoCNN(tuple(config["inputs"]), fusion=config["fusion"], hidden=config["hidden"], dropout=config["dropout"],
-                   wave_layers=config.get("wave_layers", 8), echo_channels=config.get("echo_channels", 24))
+                   wave_layers=config.get("wave_layers", 8), echo_channels=config.get("echo_channels", 24),
+                   open_temperature=config.get("open_temperature", 1.0))
 
 
 class FeatureBaseline:

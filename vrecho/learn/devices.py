@@ -30,6 +30,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 from tqdm import tqdm
 
 from ..errors import VrechoError, check_count, read_json
@@ -234,6 +235,38 @@ def device_inputs(path: str | Path, *, progress: bool = False) -> dict[str, tupl
         x = {"envelope": torch.as_tensor(np.concatenate(env)), "bands": torch.as_tensor(np.concatenate(bands))}
         out[split] = (x, targets(labels, np.arange(n)))
     return out
+
+
+def open_temperature(model, inputs: dict, target: dict) -> float:
+    """The temperature of a trained model's open/closed head (:class:`~vrecho.models.EchoCNN`'s
+    ``open_temperature``): the one number its logits are divided by that makes the frames'
+    open probabilities likeliest (temperature scaling, Guo et al. 2017), fitted on frames no
+    weight was fitted to (other devices' validation frames, :func:`device_inputs`).
+    Open/closed answers stay as they were; only their confidence moves.
+
+    Parameters
+    ----------
+    model : EchoCNN
+        Trained, in the inputs' form (switched to evaluation for the fit).
+    inputs, target : dict
+        :func:`device_inputs`' ``"val"`` pair: the model's inputs and their targets (``open``).
+
+    Returns
+    -------
+    float
+        Within 0.2 to 5, rounded to 1e-4.
+    """
+    import torch  # training's, as above
+
+    was = model.training
+    model.eval()
+    with torch.no_grad():
+        logits = model(inputs)["open"].double()
+    model.train(was)
+    z = (logits[:, 1] - logits[:, 0]).numpy()
+    sign = 2 * np.asarray(target["open"], float) - 1
+    fit = minimize_scalar(lambda t: float(np.mean(np.logaddexp(0, -sign * z / t))), bounds=(0.2, 5), method="bounded")
+    return round(float(fit.x), 4)
 
 
 def calibration_error(p, y, bins: int = 10) -> float:

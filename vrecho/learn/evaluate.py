@@ -37,7 +37,7 @@ from ..io import OutputFolder, atomic_write_text, ensure_writable_dir
 from ..models import HEADS, EchoCNN, FeatureBaseline, build
 from . import cluster
 from .datasets import open_dataset
-from .devices import device_inputs, judge_devices, load_devices_manifest
+from .devices import device_inputs, judge_devices, load_devices_manifest, open_temperature
 from .report import activation_maximisation, confusion_figures, write_tables
 from .train import fit, metrics, predict_batches, targets
 
@@ -419,11 +419,14 @@ def train_methods(data, out, *, methods=None, seed: int = 0, epochs: int = 40, p
             h = fit(model, x_tr, y_tr, x_va, y_va,
                     epochs=min(epochs, m.max_epochs or epochs), patience=patience,
                     seed=seed, checkpoint=path.with_suffix(".ckpt"), progress=progress, desc=m.name)
+            if len(y_tr["open"]) > len(tr):  # other devices heard: their validation frames calibrate open/closed
+                model.config["open_temperature"] = open_temperature(model, *more["val"])
             torch.save({"config": model.config, "state": model.state_dict()}, path)
             rec = {"epochs": h.epochs, "best_epoch": h.best_epoch, "val_loss": round(h.best_val_loss, 4),
                    "seconds": round(h.seconds, 1)}
             if len(y_tr["open"]) > len(tr):
                 rec["device_frames"] = [len(y_tr["open"]) - len(tr), len(y_va["open"]) - len(va)]
+                rec["open_temperature"] = model.config["open_temperature"]
         else:
             est = FeatureBaseline(m.kind, m.inputs).fit(tr.inputs(m.inputs), tr.y)
             path.write_bytes(pickle.dumps(est))
