@@ -218,7 +218,7 @@ def plane_echo_from_responses(h: np.ndarray, d: np.ndarray, tolerance_m: float, 
         k = np.argmax(weighed, axis=1)
         p = lo + k
         peak = weighed[rows[:, 0], k]
-        path = c * _parabolic(env, p) / FS
+        path = c * parabolic_peaks(env, p) / FS
         # the ring around the window: ``ring`` samples either side, ``gap`` away (none within gap of the direct sound)
         start = np.maximum(lo - gap - ring, t0 + gap)
         before = np.arange(ring)[None] + start[:, None]
@@ -228,20 +228,6 @@ def plane_echo_from_responses(h: np.ndarray, d: np.ndarray, tolerance_m: float, 
         if b == 0:
             depth[:] = _image_depth(path, a, r)
     return PlaneEcho(features, depth)
-
-
-_STEPS = np.array([-1, 0, 1])
-
-
-def _parabolic(env: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """:func:`~vrecho.signals.parabolic_peaks` of one peak ``p[i]`` in each row of ``env`` (B, n),
-    its arithmetic in double precision as there."""
-    inner = (p > 0) & (p < env.shape[1] - 1)
-    three = env[np.arange(len(p))[:, None], np.minimum(np.maximum(p[:, None] + _STEPS, 0), env.shape[1] - 1)]
-    a, b, c = three.astype(float).T
-    den = a - 2 * b + c
-    bend = inner & (den < 0)
-    return np.where(bend, p + 0.5 * (a - c) / np.where(bend, den, -1.0), p.astype(float))
 
 
 def _plane_db_rows(peak: np.ndarray, around: np.ndarray, direct: np.ndarray, path: np.ndarray, r: np.ndarray

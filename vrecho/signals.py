@@ -455,15 +455,16 @@ def parabolic_peaks(y: np.ndarray, i: np.ndarray) -> np.ndarray:
 
     Parameters
     ----------
-    y : numpy.ndarray, shape (n,), float
-        The signal.
-    i : array_like, shape (m,), int
-        Sample indices of the peaks.
+    y : numpy.ndarray, shape (n,) or (B, n), float
+        The signal, or B of them.
+    i : array_like, shape (m,) or (B,), int
+        Sample indices of the peaks; with B signals, one peak in each.
 
     Returns
     -------
-    numpy.ndarray, shape (m,), float64
-        Refined positions, in samples.
+    numpy.ndarray, shape (m,) or (B,), float64
+        Refined positions, in samples (with B signals or a few dozen peaks, in double
+        precision whatever ``y``'s).
 
     Examples
     --------
@@ -471,6 +472,10 @@ def parabolic_peaks(y: np.ndarray, i: np.ndarray) -> np.ndarray:
     array([2.16666667])
     """
     i = np.asarray(i)
+    if y.ndim == 2:  # one peak a row: its three samples
+        n = y.shape[1]
+        a, b, c = np.take_along_axis(y, np.clip(i[:, None] + _THREE, 0, n - 1), axis=1).astype(float).T
+        return _vertex(i, (i > 0) & (i < n - 1), a, b, c)
     if i.size <= 32:  # a few dozen peaks: plain floats beat a dozen array calls
         last = len(y) - 1
         out = []
@@ -483,8 +488,15 @@ def parabolic_peaks(y: np.ndarray, i: np.ndarray) -> np.ndarray:
                     continue
             out.append(float(k))
         return np.array(out)
-    inner = (i > 0) & (i < len(y) - 1)
-    a, b, c = y[np.maximum(i - 1, 0)], y[i], y[np.minimum(i + 1, len(y) - 1)]
+    return _vertex(i, (i > 0) & (i < len(y) - 1), y[np.maximum(i - 1, 0)], y[i], y[np.minimum(i + 1, len(y) - 1)])
+
+
+_THREE = np.array([-1, 0, 1])
+
+
+def _vertex(i: np.ndarray, inner: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """The parabola through ``a``, ``b``, ``c`` (samples ``i`` - 1, ``i``, ``i`` + 1): its
+    vertex where ``inner`` and it bends down, ``i`` elsewhere."""
     den = a - 2 * b + c
     bend = inner & (den < 0)
     return i + np.where(bend, 0.5 * (a - c) / np.where(bend, den, -1.0), 0.0)
