@@ -202,13 +202,10 @@ def plane_echo_from_responses(h: np.ndarray, d: np.ndarray, tolerance_m: float, 
     for b, env, gap, ring in _plane_envelopes(h, tolerance_m):  # every frame at once: plane_echo's loop, in arrays
         t0 = np.argmax(env[:, :int(0.002 * FS)], axis=1)
         r = c * t0 / FS
-        if toward is None:  # (plane_window_m's arithmetic, frame by frame)
-            a = np.zeros(len(d))
-            near, far, centre = 2 * (d - tolerance_m) - r, 2 * (d + tolerance_m) + r, 2 * d
-        else:
-            a = np.clip(toward, -r, r)
-            near, far = (_image_path(np.maximum(d + k * tolerance_m, a / 2), a, r) for k in (-1, 1))
-            centre = _image_path(d, a, r)
+        a = None if toward is None else np.clip(toward, -r, r)
+        near, far = plane_window_m(d, r, tolerance_m, a)
+        centre = 2 * d if a is None else _image_path(d, a, r)
+        a = np.zeros(len(d)) if a is None else a
         lo = np.maximum(np.floor(near / c * FS).astype(int), t0 + gap)
         hi = np.maximum(np.ceil(far / c * FS).astype(int), lo + 1)
         at = lo[:, None] + np.arange(int((hi - lo).max()) + 1)  # each frame's window, padded past its end
@@ -438,8 +435,7 @@ def _window_prior(at: np.ndarray, near: np.ndarray, far: np.ndarray, centre: np.
     return np.exp(-0.5 * ((path - centre[:, None]) / np.maximum((far - near) / 2, 1e-3)[:, None]) ** 2)
 
 
-def plane_window_m(d: float, r: float, tolerance_m: float = PLANE_TOLERANCE_M, mic_toward_m: float | None = None
-                   ) -> tuple[float, float]:
+def plane_window_m(d, r, tolerance_m: float = PLANE_TOLERANCE_M, mic_toward_m=None) -> tuple:
     """The nearest and farthest path, loudspeaker to microphone, of the echo of a plane ``d``
     metres away (within ``tolerance_m``), the microphone ``r`` from the loudspeaker: anywhere
     within r of 2 d, or, with the microphone ``mic_toward_m`` toward the plane (at most r
@@ -447,14 +443,16 @@ def plane_window_m(d: float, r: float, tolerance_m: float = PLANE_TOLERANCE_M, m
 
     Parameters
     ----------
-    d, r, tolerance_m : float
+    d, r : float or numpy.ndarray
+        Metres: one frame's, or arrays of frames' (broadcast together).
+    tolerance_m : float
         Metres.
-    mic_toward_m : float, optional
+    mic_toward_m : float or numpy.ndarray, optional
         Metres, within -r to r.
 
     Returns
     -------
-    near, far : float
+    near, far : float or numpy.ndarray
         Metres of path: where :func:`plane_echo` looks for the echo.
 
     Examples
@@ -466,7 +464,8 @@ def plane_window_m(d: float, r: float, tolerance_m: float = PLANE_TOLERANCE_M, m
     """
     if mic_toward_m is None:  # the microphone anywhere r away: the path lies within 2 d -+ r
         return 2 * (d - tolerance_m) - r, 2 * (d + tolerance_m) + r
-    return tuple(float(_image_path(max(d + k * tolerance_m, mic_toward_m / 2), mic_toward_m, r)) for k in (-1, 1))
+    near, far = (_image_path(np.maximum(d + k * tolerance_m, np.divide(mic_toward_m, 2)), mic_toward_m, r) for k in (-1, 1))
+    return (near, far) if np.ndim(near) else (float(near), float(far))
 
 
 def _image_path(d, a: float, r: float):
