@@ -200,8 +200,7 @@ def plane_echo_from_responses(h: np.ndarray, d: np.ndarray, tolerance_m: float, 
     features, depth = np.empty((len(d), 3 * len(PLANE_BANDS_HZ))), np.empty(len(d))
     rows = np.arange(len(d))[:, None]
     for b, env, gap, ring in _plane_envelopes(h, tolerance_m):  # every frame at once: plane_echo's loop, in arrays
-        t0 = np.argmax(env[:, :int(0.002 * FS)], axis=1)
-        r = c * t0 / FS
+        t0, r = _direct(env)
         a = None if toward is None else np.clip(toward, -r, r)
         near, far = plane_window_m(d, r, tolerance_m, a)
         centre = 2 * d if a is None else _image_path(d, a, r)
@@ -277,11 +276,12 @@ def _plane_kernel(b: int, m: int, dtype: str) -> np.ndarray:
     return k
 
 
-def _direct(e: np.ndarray) -> tuple[int, float]:
+def _direct(e: np.ndarray):
     """The direct sound's sample in an envelope (its peak in the first 2 ms) and the microphone's
-    distance from the loudspeaker that it gives, in metres."""
-    t0 = int(np.argmax(e[:int(0.002 * FS)]))
-    return t0, SPEED_OF_SOUND * t0 / FS
+    distance from the loudspeaker that it gives, in metres; for envelopes (B, n), one of each
+    per row."""
+    t0 = np.argmax(e[..., :int(0.002 * FS)], axis=-1)
+    return (int(t0), SPEED_OF_SOUND * int(t0) / FS) if e.ndim == 1 else (t0, SPEED_OF_SOUND * t0 / FS)
 
 
 def _ring(e: np.ndarray, lo: int, hi: int, t0: int, gap: int, ring: int) -> np.ndarray:
