@@ -76,6 +76,19 @@ def test_a_planes_echo_is_the_frames_own_whatever_its_batch():
     assert alone.features[0, 0] > 20
 
 
+def test_the_farthest_plane_is_read_whatever_the_microphones_distance():
+    """A plane at the farthest distance allowed, with the widest tolerance, and a direct sound as
+    late as plane_echo looks for it (the microphone 0.68 m off, or a frame that starts early):
+    its window and the echoes around it lie within the envelope read (an IndexError before)."""
+    from vrecho.planes import DIRECT_S, MAX_SURFACE_M, plane_echo
+    from vrecho.signals import probe
+
+    frame = np.zeros(44_100, np.float32)
+    lag = int(DIRECT_S * 44_100) - 1
+    frame[lag:lag + 4410] += probe()
+    echo = plane_echo(np.stack([frame, frame]), probe(), [MAX_SURFACE_M, 1.0], tolerance_m=0.5)
+    assert np.all(np.isfinite(echo.features)) and echo.features.shape == (2, 6)
+
 @pytest.mark.parametrize("sound", ["clap", "white_noise", "probe"])
 def test_self_features_find_an_echo_without_the_emitted_sound(sound):
     """The recording as its own reference: the echo 291 samples after the direct sound (itself

@@ -243,9 +243,11 @@ def _plane_envelopes(h: np.ndarray, tolerance_m: float):
     ring (in samples) that :func:`_ring` keeps around a window."""
     c = SPEED_OF_SOUND
     ring = int(np.ceil(RING_M / c * FS))
-    # one length for every frame, the farthest plane's (a frame's envelope must not depend on its batch)
-    n = min(int(np.ceil((2 * (MAX_SURFACE_M + tolerance_m) + 0.3) / c * FS)) + ring + 8, FS)
     gap = int(np.ceil(0.1 / c * FS))  # 10 cm of path kept clear between the window and the ring
+    # one length for every frame, the farthest window's and its ring's, the microphone as far as
+    # the direct sound's search allows (a frame's envelope must not depend on its batch)
+    far = 2 * (MAX_SURFACE_M + tolerance_m) + c * DIRECT_S
+    n = min(int(np.ceil(far / c * FS)) + gap + ring + 8, FS)
     half = PLANE_KERNEL_HALF
     m = scipy.fft.next_fast_len(n + 4 * half, real=True)
     # the response's last samples, then its first: a whole second's band response is circular
@@ -276,11 +278,16 @@ def _plane_kernel(b: int, m: int, dtype: str) -> np.ndarray:
     return k
 
 
+DIRECT_S = 0.002
+"""Where :func:`plane_echo` looks for the direct sound: its envelope's peak in the response's first
+2 ms (the microphone within 69 cm of the loudspeaker)."""
+
+
 def _direct(e: np.ndarray):
-    """The direct sound's sample in an envelope (its peak in the first 2 ms) and the microphone's
-    distance from the loudspeaker that it gives, in metres; for envelopes (B, n), one of each
-    per row."""
-    t0 = np.argmax(e[..., :int(0.002 * FS)], axis=-1)
+    """The direct sound's sample in an envelope (its peak in the first :data:`DIRECT_S`) and the
+    microphone's distance from the loudspeaker that it gives, in metres; for envelopes (B, n), one
+    of each per row."""
+    t0 = np.argmax(e[..., :int(DIRECT_S * FS)], axis=-1)
     return (int(t0), SPEED_OF_SOUND * int(t0) / FS) if e.ndim == 1 else (t0, SPEED_OF_SOUND * t0 / FS)
 
 
