@@ -24,7 +24,9 @@ rows are run) and heard through each row's stream:
 - other headsets: one or two more wearers 0.8 to 3 m away running the same call, each on its
   own seed and clock;
 - noise: speech, music, TV or a fan, 0 to 30 dB below the direct sound (on top of pink noise 20
-  to 40 dB below);
+  to 40 dB below; every row's noise is set against the direct sound the reference headset would
+  hear, ``WalkResponses.room_level``: a room is no louder to a microphone a centimetre from its
+  loudspeaker);
 - block 64, block 2048: those block sizes; every other row, 10 ms blocks;
 - disturbed: clipped at half the direct sound's peak, a 20 ms dropout and a 10 ms block of NaNs
   every second, blocks of 16 to 4096 samples;

@@ -199,6 +199,23 @@ def test_a_dropout_late_in_every_pulse_keeps_the_echoes_before_it(glass):
     assert a is not None and at >= 0.5, at
 
 
+def test_the_rooms_noise_is_the_rooms_whatever_the_headset():
+    """record_walk sets the room's noise against the direct sound the reference headset would hear
+    (WalkResponses.room_level): a microphone a centimetre from its loudspeaker hears its own
+    probe eight times louder than one 7 cm away, and the room no louder."""
+    scene, start, target, plane = _geometry("glass")
+    start = target + (start - target) * 0.25  # a short walk: 0.6 m from the glass
+    sch = _monitor().schedule
+    walks = [walk_responses(scene, start, target, 1.5, sch, plane, np.random.default_rng(0), headset=h, lead_s=0.0)
+             for h in (Headset(), Headset((0.0, 0.0, 0.01)), Headset((0.10, 0.0, 0.0)),
+                       Headset((0.0, -0.15, 0.0), (0.0, 0.0, -1.0), 0.6))]
+    direct = [w.direct for w in walks]
+    level = [w.room_level for w in walks]
+    assert level[0] == direct[0]  # the reference headset: its own direct sound
+    assert max(direct[:3]) / min(direct[:3]) > 5 and max(level[:3]) / min(level[:3]) < 1.15
+    assert abs(level[3] / (level[0] * 0.6 / scene.emitter_p) - 1) < 0.05  # a cardioid 0.6: its side's gain
+
+
 def test_a_loudspeaker_facing_away_in_a_quiet_room_is_warned_in_time():
     # The loudspeaker faces back, the microphone 2.4 cm from it: the glass's echo comes back 50 dB
     # under the direct sound, yet in a quiet room 10 to 30 times the envelope's median. A floor

@@ -15,8 +15,10 @@ Two steps, so that one walk's room is simulated once and heard through many stre
   round trip from loudspeaker write to microphone read, steps of it by whole blocks as after an
   underrun, the two clocks drifting apart), with the pings of other headsets in the room
   (:func:`other_headsets`, each on its own dithered schedule), ambient sound (speech, music, TV,
-  a fan) and pink noise below the direct sound, and microphone self-noise. People walking past
-  add their bodies' echoes to the responses (:mod:`vrecho.sim.people`).
+  a fan) and pink noise below the direct sound the reference headset hears (a room is no
+  louder to a microphone a centimetre from its loudspeaker: :attr:`WalkResponses.room_level`),
+  and microphone self-noise. People walking past add their bodies' echoes to the responses
+  (:mod:`vrecho.sim.people`).
 
 :func:`simulate_walk` does both. Times: the monitor writes pulse ``k`` at sample ``e_k`` of the
 stream (:class:`~vrecho.headset.ProbeSchedule`); the loudspeaker plays it ``output_share`` of the
@@ -190,6 +192,22 @@ class WalkResponses:
     direct: float
     headset: Headset
     scene: Scene = field(repr=False)
+
+    @property
+    def room_level(self) -> float:
+        """The level the room's sounds are set against (:func:`record_walk`): the direct sound the
+        reference headset (PROTOCOL.md's device: the microphone 7 cm to the side of a loudspeaker
+        facing forward) would hear from this loudspeaker. A room is no louder to a microphone a
+        centimetre from its loudspeaker, nor quieter to one behind it: :attr:`direct` scaled by the
+        reference's gain over distance, p / 7 cm, against this headset's, (p + (1 - p) cos a) / r
+        (a the angle from the loudspeaker's axis to the microphone, r their spacing), as
+        :mod:`vrecho.sim.devices` sets its frames' noise."""
+        h = self.headset
+        p = self.scene.emitter_p if h.speaker_p is None else h.speaker_p
+        offset, axis = np.asarray(h.mic_offset_m, float), np.asarray(h.speaker_axis, float)
+        r = max(float(np.linalg.norm(offset)), 1e-3)
+        gain = p + (1 - p) * float(offset @ axis) / (r * float(np.linalg.norm(axis)))
+        return self.direct * (p / MIC_ABOVE_EMITTER_M) / (max(gain, 1e-3) / r)
 
 
 @dataclass
@@ -426,11 +444,12 @@ def record_walk(walk: WalkResponses, rng: np.random.Generator, *, link: AudioLin
     link : AudioLink
         The stream's round trip, its steps and the clocks' drift (default: none).
     snr_db : float, optional
-        Pink background noise in dB below the direct sound's peak (drawn from 20 to 40 dB by
-        default).
+        Pink background noise in dB below the direct sound's peak as the reference headset
+        hears it (:attr:`WalkResponses.room_level`; drawn from 20 to 40 dB by default), and the
+        microphone's self-noise 60 dB below it.
     ambient : {"speech", "music", "tv", "fan"}, optional
-        An ambient sound (:data:`AMBIENT_KINDS`), its RMS ``ambient_db`` below the direct
-        sound's peak (drawn from 0 to 30 dB by default).
+        An ambient sound (:data:`AMBIENT_KINDS`), its RMS ``ambient_db`` below the same level
+        (drawn from 0 to 30 dB by default).
     ambient_db : float, optional
         See ``ambient``.
     others : numpy.ndarray, optional
@@ -461,7 +480,7 @@ def record_walk(walk: WalkResponses, rng: np.random.Generator, *, link: AudioLin
         keep = at < total
         np.add.at(x, at[keep], others[keep])
     n = len(x)
-    d = walk.direct
+    d = walk.room_level
     snr = float(rng.uniform(20, 40)) if snr_db is None else snr_db
     x += d * (10 ** (-snr / 20) * colored_noise(n, 1.0, rng) + 10 ** (-60 / 20) * rng.standard_normal(n))
     if ambient is not None:
