@@ -215,26 +215,10 @@ def plane_echo_from_responses(h: np.ndarray, d: np.ndarray, tolerance_m: float, 
         p = lo + k
         peak = weighed[rows[:, 0], k]
         path = c * parabolic_peaks(env, p) / FS
-        # the ring around the window: ``ring`` samples either side, ``gap`` away (none within gap of the direct sound)
-        start = np.maximum(lo - gap - ring, t0 + gap)
-        before = np.arange(ring)[None] + start[:, None]
-        around = np.concatenate([np.where(before < np.maximum(lo - gap, t0 + gap)[:, None], env[rows, before], np.inf),
-                                 env[rows, (hi + gap)[:, None] + np.arange(ring)]], axis=1)
-        features[:, 3 * b:3 * b + 3] = _plane_db_rows(peak, around, env[rows[:, 0], t0], path, r)
+        features[:, 3 * b:3 * b + 3] = _db_over(peak, *_ring(env, lo, hi, t0, gap, ring), env[rows[:, 0], t0], path, r)
         if b == 0:
             depth[:] = _image_depth(path, a, r)
     return PlaneEcho(features, depth)
-
-
-def _plane_db_rows(peak: np.ndarray, around: np.ndarray, direct: np.ndarray, path: np.ndarray, r: np.ndarray
-                   ) -> np.ndarray:
-    """:func:`_plane_db` of one echo per row: ``around`` (B, k) padded with infinity where a
-    row's ring is cut short (by the direct sound), its median and maximum taken over the rest."""
-    ordered = np.sort(around, axis=1)
-    count = np.isfinite(around).sum(axis=1)
-    rows = np.arange(len(peak))
-    middle = (ordered[rows, (count - 1) // 2] + ordered[rows, count // 2]) / 2  # (numpy's median: their mean)
-    return _db_over(peak, middle, ordered[rows, count - 1], direct, path, r)
 
 
 def _plane_envelopes(h: np.ndarray, tolerance_m: float):
@@ -291,23 +275,28 @@ def _direct(e: np.ndarray):
     return (int(t0), SPEED_OF_SOUND * int(t0) / FS) if e.ndim == 1 else (t0, SPEED_OF_SOUND * t0 / FS)
 
 
-def _ring(e: np.ndarray, lo: int, hi: int, t0: int, gap: int, ring: int) -> np.ndarray:
-    """The envelope ``e`` around the window ``lo`` to ``hi``: ``ring`` samples on either side,
-    ``gap`` away from it, none within ``gap`` of the direct sound ``t0``."""
-    return np.concatenate([e[max(lo - gap - ring, t0 + gap):max(lo - gap, t0 + gap)], e[hi + gap:hi + gap + ring]])
-
-
-def _plane_db(peak, around: np.ndarray, direct: float, path, r: float) -> np.ndarray:
-    """:class:`PlaneEcho`'s three features of an echo ``peak`` (a float, or an array of them at
-    the paths ``path``, metres): over the median of the echoes ``around``, over their strongest,
-    and over the ``direct`` sound with spherical spreading undone (the microphone ``r`` metres
-    from the loudspeaker), in dB; the last axis the three."""
-    return _db_over(peak, np.median(around), around.max(), direct, path, r)
+def _ring(env: np.ndarray, lo: np.ndarray, hi: np.ndarray, t0: np.ndarray, gap: int, ring: int) -> tuple:
+    """The median and the strongest of the envelopes ``env`` (B, n) around each row's window ``lo``
+    to ``hi`` (B,): ``ring`` samples on either side, ``gap`` away from it, none within ``gap`` of
+    the direct sound ``t0`` (B,) nor past the envelope's end."""
+    rows = np.arange(len(env))[:, None]
+    before = np.arange(ring)[None] + np.maximum(lo - gap - ring, t0 + gap)[:, None]
+    after = (hi + gap)[:, None] + np.arange(ring)
+    around = np.concatenate([np.where(before < np.maximum(lo - gap, t0 + gap)[:, None], env[rows, before], np.inf),
+                             np.where(after < env.shape[1], env[rows, np.minimum(after, env.shape[1] - 1)], np.inf)],
+                            axis=1)  # (infinity where a row's ring is cut short: left out below)
+    ordered = np.sort(around, axis=1)
+    count = np.isfinite(around).sum(axis=1)
+    rows = rows[:, 0]
+    middle = (ordered[rows, (count - 1) // 2] + ordered[rows, count // 2]) / 2  # (numpy's median: their mean)
+    return middle, ordered[rows, count - 1]
 
 
 def _db_over(peak, middle, top, direct, path, r) -> np.ndarray:
-    """:func:`_plane_db`'s three features of ``peak`` (arrays broadcast together) from the median
-    and the strongest of the echoes around it."""
+    """:class:`PlaneEcho`'s three features of an echo ``peak`` (arrays broadcast together, or
+    floats; at the paths ``path``, metres): over the ``middle`` (median) of the echoes around it,
+    over their strongest (``top``), and over the ``direct`` sound with spherical spreading undone
+    (the microphone ``r`` metres from the loudspeaker), in dB; the last axis the three."""
     peak = np.asarray(peak, float)
     return 20 * np.log10(np.maximum(np.stack(
         [peak / np.maximum(np.asarray(middle, float), 1e-300), peak / np.maximum(np.asarray(top, float), 1e-300),
@@ -415,18 +404,24 @@ def plane_walk(audio, emitted, surface_m, fs: int = FS, *, tolerance_m: float = 
     depth = np.empty((len(x), len(offsets)))
     for b, env, gap, ring in _plane_envelopes(h, tolerance_m):
         top = scipy.ndimage.maximum_filter1d(env, 2 * w + 1, axis=-1)
+        t0, r = _direct(env)
+        lo, hi = np.empty(len(env), int), np.empty(len(env), int)
+        peaks, paths = np.empty((len(env), len(offsets)), env.dtype), np.empty((len(env), len(offsets)))
         for i, e in enumerate(env):
-            t0, r = _direct(e)
-            a = 0.0 if toward is None else float(np.clip(toward[i], -r, r))
+            a = 0.0 if toward is None else float(np.clip(toward[i], -r[i], r[i]))
             dd = np.maximum(d[i] + offsets, a / 2)
-            path = _image_path(dd, a, r)  # every offset's
-            at = np.clip(np.round(path / c * FS).astype(int), t0 + gap + w, env.shape[-1] - 2 - w)
-            lo, hi = int(at.min()) - w, int(at.max()) + w
-            features[i, :, 3 * b:3 * b + 3] = _plane_db(top[i, at], _ring(e, lo, hi, t0, gap, ring), e[t0], path, r)
+            paths[i] = _image_path(dd, a, r[i])  # every offset's
+            at = np.clip(np.round(paths[i] / c * FS).astype(int), t0[i] + gap + w, env.shape[-1] - 2 - w)
+            lo[i], hi[i] = int(at.min()) - w, int(at.max()) + w
+            peaks[i] = top[i, at]
             if b == 0:  # where, near each offset's path, the echo peaks
                 near = at[:, None] + np.arange(-w, w + 1)
                 k = near[np.arange(len(at)), np.argmax(e[near], axis=1)]
-                depth[i] = _image_depth(c * parabolic_peaks(e, k) / FS, a, r)
+                depth[i] = _image_depth(c * parabolic_peaks(e, k) / FS, a, r[i])
+        middle, strongest = _ring(env, lo, hi, t0, gap, ring)
+        direct = env[np.arange(len(env)), t0]
+        features[:, :, 3 * b:3 * b + 3] = _db_over(peaks, middle[:, None], strongest[:, None], direct[:, None], paths,
+                                                   r[:, None])
     return PlaneWalk(features, offsets, depth)
 
 
