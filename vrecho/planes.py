@@ -267,12 +267,11 @@ DIRECT_S = 0.002
 2 ms (the microphone within 69 cm of the loudspeaker)."""
 
 
-def _direct(e: np.ndarray):
-    """The direct sound's sample in an envelope (its peak in the first :data:`DIRECT_S`) and the
-    microphone's distance from the loudspeaker that it gives, in metres; for envelopes (B, n), one
-    of each per row."""
-    t0 = np.argmax(e[..., :int(DIRECT_S * FS)], axis=-1)
-    return (int(t0), SPEED_OF_SOUND * int(t0) / FS) if e.ndim == 1 else (t0, SPEED_OF_SOUND * t0 / FS)
+def _direct(env: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The direct sound's sample in each envelope of ``env`` (B, n) (its peak in the first
+    :data:`DIRECT_S`) and the microphone's distance from the loudspeaker that it gives, in metres."""
+    t0 = np.argmax(env[:, :int(DIRECT_S * FS)], axis=1)
+    return t0, SPEED_OF_SOUND * t0 / FS
 
 
 def _ring(env: np.ndarray, lo: np.ndarray, hi: np.ndarray, t0: np.ndarray, gap: int, ring: int) -> tuple:

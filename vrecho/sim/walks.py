@@ -204,9 +204,9 @@ class WalkResponses:
         :mod:`vrecho.sim.devices` sets its frames' noise."""
         h = self.headset
         p = self.scene.emitter_p if h.speaker_p is None else h.speaker_p
-        offset, axis = np.asarray(h.mic_offset_m, float), np.asarray(h.speaker_axis, float)
-        r = max(float(np.linalg.norm(offset)), 1e-3)
-        gain = p + (1 - p) * float(offset @ axis) / (r * float(np.linalg.norm(axis)))
+        axis = np.asarray(h.speaker_axis, float)
+        r = max(h.spacing_m, 1e-3)
+        gain = p + (1 - p) * float(np.asarray(h.mic_offset_m, float) @ axis) / (r * float(np.linalg.norm(axis)))
         return self.direct * (p / MIC_ABOVE_EMITTER_M) / (max(gain, 1e-3) / r)
 
 
