@@ -895,3 +895,61 @@ def test_a_wall_behind_that_took_a_passers_by_echoes_keeps_its_pace():
     mon._judge(None, mirror.times[-1] + 0.04)
     assert mirror.ahead is None and mon._behind == pytest.approx(1.4, abs=0.02) and mon._level == "caution"
     assert mon._pace == pytest.approx(1.5)  # (the mirror's: the wall behind's line is slower)
+
+
+def test_a_line_at_the_wearers_pace_starts_a_track_though_the_head_bob_bends_it():
+    # A wall walked toward at 1.8 m/s, its echo over three pulses 7.5 mm off a straight line (the
+    # head's bob; seed 5000's all at once, room 23), among stray peaks: no track at any pace (6 mm),
+    # one at the wearer's pace once the walls behind tell it; a line of stray peaks bent as much at
+    # another speed starts none either way.
+    from vrecho.headset.tracks import initiate
+
+    def pulses():
+        echoes = ([(1.409, 0.05), (0.62, 0.02), (2.7, 0.02)], [(1.344, 0.05), (0.72, 0.02), (2.6835, 0.02)],
+                  [(1.264, 0.05), (0.8, 0.02), (2.652, 0.02)])
+        return [(0.04 * k, sorted(e), 2.0, 0.03) for k, e in enumerate(echoes)]
+
+    assert initiate(pulses()) == []
+    born = initiate(pulses(), pace=1.8)
+    assert len(born) == 1 and abs(born[0].speed + 1.8) < 0.15 and abs(born[0].d_hat - 1.264) < 0.01
+
+
+def test_a_track_closing_at_the_wearers_pace_weighs_as_a_surface_ahead():
+    # The same echoes, among 8 stray peaks a metre: a track closing at the wearer's pace (the walls
+    # behind recede at it) gains log(3.2 / (0.2 * pace)) an echo more than where the pace is not
+    # known; one closing at half the pace, nothing.
+    from vrecho.headset.tracks import Track
+
+    def score(speed, pace):
+        tr, rng = Track(), np.random.default_rng(0)
+        for k in range(8):
+            tr.update(0.04 * k, 2.0 - speed * 0.04 * k + float(rng.normal(0, 0.002)), 0.02, clutter_per_m=8.0, pace=pace)
+        return tr.score
+
+    gain = score(1.5, 1.5) - score(1.5, 0.0)
+    assert abs(gain - 6 * np.log(3.2 / (0.2 * 1.5))) < 0.01  # (from the third echo on: the speed known)
+    assert score(0.75, 1.5) == score(0.75, 0.0)
+
+
+def test_the_wearers_pace_is_the_walls_behinds_not_a_surface_nearing():
+    # A person walking toward the wearer, nearing at 1.3 m/s, among 20 stray peaks a pulse; the
+    # wearer, from standing, walks at 0.6 m/s (the wall behind recedes at that). The fastest surface
+    # heard is the person, and would be its own pace (seed 44000's all at once, room 4's door: its
+    # track's score rose on it to a caution at 0.64 m). The pace the tracks are weighed by is the
+    # walls behind's: the person's track scores more only where the wearer walks at 1.3 m/s too.
+    def score(pace):
+        mon, rng = _monitor(), np.random.default_rng(0)
+        for k in range(34):
+            t = 0.04 * k
+            u = max(t - 0.4, 0.0)
+            walked = 1.5 * min(u, pace / 3) ** 2 + pace * max(u - pace / 3, 0.0)  # (3 m/s^2 up to the pace)
+            echoes = [(1.2 + walked + float(rng.normal(0, 0.001)), 0.03)]
+            if k >= 16:
+                echoes.append((3.5 - 1.3 * (t - 0.64) + float(rng.normal(0, 0.001)), 0.03))
+            echoes += [(float(d), 0.02) for d in rng.uniform(0.3, 3.9, 20)]
+            mon._now = int(t * mon.fs)
+            mon._commit(t, sorted(echoes))
+            mon._judge(None, t)
+        return max(tr.score for tr in mon._tracks if tr.speed is not None and abs(tr.speed + 1.3) < 0.1)
+
+    assert score(1.3) > score(0.6) + 5

@@ -27,6 +27,7 @@ seed (a faint tick), and:
    in a line over three pulses at a walking pace (:func:`~.tracks.initiate`: where other headsets'
    pings crowd the range, one echo says nothing of its speed), or from a line of faint echoes summed
    along each approach over eight pulses (:mod:`.faint`), which also keep a track that missed one.
+   A track closing at the wearer's pace (the walls behind recede at it) weighs as a surface ahead.
 3. **Alerts with hysteresis.** Only surfaces the wearer moves toward count (``approach_m``
    nearer within 0.8 s, in the last second) and will not pass by: a point at lateral offset
    ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, so a quadratic fit over the last 0.3 to 0.6 s
@@ -565,30 +566,29 @@ class BoundaryMonitor:
     def _commit(self, t: float, echoes, faint=(), lines=()) -> None:
         """Add the echoes of the pulse emitted at ``t`` (seconds) to the tracks, and its faint echoes
         and their lines (:class:`~.faint.FaintEchoes`)."""
-        updated = []
-        clutter = len(echoes) / (self.max_range_m - self.min_range_m)  # peaks per metre in this pulse
+        updated, clutter = [], len(echoes) / (self.max_range_m - self.min_range_m)  # peaks per metre in this pulse
+        behind = min(max(self._behind, 0.0), _PACE_MAX_MPS)  # the wearer's pace as the walls behind recede (Track.update)
         mean_strength = clutter_strength(echoes)
         fresh, near = [], sorted(d for d, _ in echoes)
         for tr, d, strength in associate(self._tracks, t, echoes):
             if tr is None or abs(d - tr.predict(t)) > 0.5 * tr.gate_m:  # (taken far off its track's line: may
                 fresh.append((d, strength))  # be another surface's, whose range the track crossed, and start its own)
             if tr is not None:
-                tr.update(t, d, strength, clutter_per_m=crowding(near, d, clutter), clutter_strength=mean_strength)
+                tr.update(t, d, strength, clutter_per_m=crowding(near, d, clutter), clutter_strength=mean_strength, pace=behind)
                 updated.append(tr)
         fresh.sort()
-        seeded, lifted = attach_faint(self._tracks, t, faint, lines, clutter, mean_strength, fresh)
+        seeded, lifted = attach_faint(self._tracks, t, faint, lines, clutter, mean_strength, fresh, behind)
         updated += lifted
         for tr in self._tracks:
             if tr.times[-1] != t:
                 tr.missed()
         # New surfaces: three echoes no track took, in a line over the last three pulses, or faint lines.
         self._fresh = self._fresh[-2:] + [(t, fresh, clutter, mean_strength)]
-        born = initiate(self._fresh) + seeded
+        born = initiate(self._fresh, pace=behind) + seeded
         self._tracks += born
         updated += born
-        for tr in updated:
-            if tr.closed_in(0.8) >= self.approach_m:
-                tr.approached_at = t
+        for tr in (tr for tr in updated if tr.closed_in(0.8) >= self.approach_m):
+            tr.approached_at = t
         # Only a surface being approached can need an alert: the fits are for those.
         still = self._still = [tr.d_hat for tr in self._tracks if len(tr.times) >= 10 and tr.speed is not None
                                and abs(tr.speed) < 0.25 and tr.d_hat >= self.miss_m and tr.confirmed]
@@ -696,5 +696,5 @@ _RANK = {"clear": 0, "caution": 1, "stop": 2}
 _TRUE = np.ones(8192, bool)  # every sample sound: the usual block's mask, never written to
 _ASIDE_TTC = 0.75  # (of caution_ttc_s, for a surface aside: a wall met at under 30 degrees, grazed)
 _PACE_MAX_MPS, _RECEDING_MPS = 2.0, 0.1  # the fastest a wearer walks (the envelope's); receding faster starts no alert
-_LOOMING = 12.0  # the track score from which a surface nearing fast and close cautions before the fit
+_LOOMING = 10.0  # the track score from which a surface nearing fast and close cautions before the fit
 _STAGE = 441  # smaller blocks are gathered to that many (10 ms at 44.1 kHz: 16 samples cost what 480 do)
