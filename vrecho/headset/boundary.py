@@ -696,5 +696,5 @@ _RANK = {"clear": 0, "caution": 1, "stop": 2}
 _TRUE = np.ones(8192, bool)  # every sample sound: the usual block's mask, never written to
 _ASIDE_TTC = 0.75  # (of caution_ttc_s, for a surface aside: a wall met at under 30 degrees, grazed)
 _PACE_MAX_MPS, _RECEDING_MPS = 2.0, 0.1  # the fastest a wearer walks (the envelope's); receding faster starts no alert
-_LOOMING = 10.0  # the track score from which a surface nearing fast and close cautions before the fit
+_LOOMING = 12.0  # the track score from which a surface nearing fast and close cautions before the fit
 _STAGE = 441  # smaller blocks are gathered to that many (10 ms at 44.1 kHz: 16 samples cost what 480 do)

@@ -286,8 +286,8 @@ class Track:
             (2.4 at 1.5 m/s): where other headsets' pings, noise and a loudspeaker facing away
             leave a wall's echo 2 to 4 times the envelope's median, its track took stray peaks
             and climbed back too slowly to caution before 0.5 m (seed 5000's all at once: 68 of
-            90 walks cautioned in time without it, 73 with it and :func:`initiate`'s lines at
-            the pace).
+            90 walks cautioned in time without it, 72 with it, :func:`initiate`'s lines at the
+            pace and the score's floor at -6).
         """
         log_clutter = math.log(clutter_per_m) if clutter_per_m > 0.25 else _LOG_QUARTER  # (plain floats: per echo)
         times = self.times
@@ -626,7 +626,7 @@ def attach_faint(tracks: list, t: float, faint, lines, clutter_per_m: float, clu
     fresh : list of (float, float)
         The pulse's echoes no track took, sorted by distance: added to in place, kept sorted.
     pace : float
-        The wearer's pace in m/s (0: not known; :meth:`Track.update`).
+        The wearer's pace in m/s (0: not known): a faint echo's track weighs it (:meth:`Track.update`).
 
     Returns
     -------
@@ -642,7 +642,7 @@ def attach_faint(tracks: list, t: float, faint, lines, clutter_per_m: float, clu
             continue
         tr = Track()
         for tj, dj, strength in line:
-            tr.update(tj, dj, strength, clutter_per_m=clutter_per_m, pace=pace)
+            tr.update(tj, dj, strength, clutter_per_m=clutter_per_m)
         tr.score = 0.0
         born.append(tr)
     for d, strength, speed in faint:
