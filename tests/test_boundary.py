@@ -915,7 +915,7 @@ def test_a_line_at_the_wearers_pace_starts_a_track_though_the_head_bob_bends_it(
 
 
 def test_a_track_closing_at_the_wearers_pace_weighs_as_a_surface_ahead():
-    # The same echoes, among 8 stray peaks a metre: a track closing at the wearer's pace (the walls
+    # A surface's echoes, among 8 stray peaks a metre: a track closing at the wearer's pace (the walls
     # behind recede at it) gains log(3.2 / (0.2 * pace)) an echo more than where the pace is not
     # known; one closing at half the pace, nothing.
     from vrecho.headset.tracks import Track

@@ -34,7 +34,8 @@ _CROWD_M = 0.1  # crowding(): the peaks this near an echo tell how densely stray
 _LINE_PEAKS = 5  # a line of faint echoes starts a track with five peaks of its own (attach_faint)
 _PACE_SHARE = 0.1  # a track within 10 % of the wearer's pace closes as a surface ahead does (Track.update)
 _PACE_MIN_MPS = 0.3  # ... once the wearer walks
-_SPEEDS_MPS = 3.2  # the speeds a new track may have: approaching at up to 2.6 m/s, receding at up to 0.6 (initiate)
+_APPROACH_MPS, _RECEDE_MPS = 2.6, 0.6  # the fastest a new track may approach and recede (initiate)
+_SPEEDS_MPS = _APPROACH_MPS + _RECEDE_MPS  # ... the span of speeds a new track may have
 _PACE_TOLERANCE_M = 0.012  # initiate: a line at the wearer's pace may bend this much (a fast walk's head bob)
 _PACE_BAND_MPS = 0.25  # ... within so much of the pace
 CONFIRMED = math.log(100.0)
@@ -494,8 +495,8 @@ class Track:
         return None if way < 0 else bool(way)
 
 
-def initiate(pulses, *, tolerance_m: float = 0.006, approach_mps: float = 2.6, recede_mps: float = 0.6,
-             pace: float = 0.0) -> list[Track]:
+def initiate(pulses, *, tolerance_m: float = 0.006, approach_mps: float = _APPROACH_MPS,
+             recede_mps: float = _RECEDE_MPS, pace: float = 0.0) -> list[Track]:
     """New tracks from the echoes no track took in the last three pulses: three, one a pulse, that
     lie on a line in time (within ``tolerance_m`` of it at the middle pulse) at a walking pace.
 
@@ -522,7 +523,7 @@ def initiate(pulses, *, tolerance_m: float = 0.006, approach_mps: float = 2.6, r
     tolerance_m : float
         How far, in metres, the middle echo may lie from the line through the other two.
     approach_mps, recede_mps : float
-        The fastest approach and retreat a line may have, in m/s.
+        The fastest approach and retreat a line may have, in m/s (default 2.6 and 0.6).
     pace : float
         The wearer's pace in m/s (0: not known): lines within :data:`_PACE_BAND_MPS` of closing
         at it first, and the tracks' scores weigh it (:meth:`Track.update`).
