@@ -39,7 +39,7 @@ from ..errors import VrechoError
 from ..headset.ranging import ProbeSchedule
 from ..scene import Scene
 from ..signals import SPEED_OF_SOUND, colored_noise
-from .acoustics import Simulation, build_room, emitter_directivity
+from .acoustics import Simulation, build_room, direct_amplitude, emitter_directivity
 from .render import render_view
 from .sounds import ambient_sound
 
@@ -207,7 +207,7 @@ class WalkResponses:
         axis = np.asarray(h.speaker_axis, float)
         r = max(h.spacing_m, 1e-3)
         gain = p + (1 - p) * float(np.asarray(h.mic_offset_m, float) @ axis) / (r * float(np.linalg.norm(axis)))
-        return self.direct * (p / MIC_ABOVE_EMITTER_M) / (max(gain, 1e-3) / r)
+        return self.direct * direct_amplitude(MIC_ABOVE_EMITTER_M, p) / direct_amplitude(r, max(gain, 1e-3))
 
 
 @dataclass
