@@ -81,7 +81,7 @@ from .kernels import compile_kernels, echo_path, take
 from .ranging import GUARD, Envelope, ProbeSchedule, channel0, clipped, pcm_scale, probe_codes, zero_runs
 from .roundtrip import RoundTrip
 from .faint import FaintEchoes
-from .tracks import Track, associate, attach_faint, clutter_strength, crowding, initiate
+from .tracks import LEND_MPS, Track, associate, attach_faint, clutter_strength, crowding, initiate
 from .view import look_all
 
 
@@ -564,29 +564,28 @@ class BoundaryMonitor:
         return out
 
     def _commit(self, t: float, echoes, faint=(), lines=()) -> None:
-        """Add the echoes of the pulse emitted at ``t`` (seconds) to the tracks, and its faint echoes
-        and their lines (:class:`~.faint.FaintEchoes`)."""
+        """Add the echoes of the pulse emitted at ``t`` (seconds), its faint ones and their lines, to the tracks."""
         updated, clutter = [], len(echoes) / (self.max_range_m - self.min_range_m)  # peaks per metre in this pulse
         behind = min(max(self._behind, 0.0), _PACE_MAX_MPS)  # the wearer's pace as the walls behind recede (Track.update)
         mean_strength = clutter_strength(echoes)
-        fresh, near = [], sorted(d for d, _ in echoes)
+        fresh, lent, near = [], [], sorted(d for d, _ in echoes)
         for tr, d, strength in associate(self._tracks, t, echoes):
             if tr is None or abs(d - tr.predict(t)) > 0.5 * tr.gate_m:  # (taken far off its track's line: may
                 fresh.append((d, strength))  # be another surface's, whose range the track crossed, and start its own)
+            elif abs((tr.speed or 0.0) + behind) > LEND_MPS and self._pace <= _PACE_SURE * behind:  # (initiate's lines at it)
+                lent.append((d, strength))
             if tr is not None:
                 tr.update(t, d, strength, clutter_per_m=crowding(near, d, clutter), clutter_strength=mean_strength, pace=behind)
                 updated.append(tr)
         fresh.sort()
         seeded, lifted = attach_faint(self._tracks, t, faint, lines, clutter, mean_strength, fresh, behind)
-        updated += lifted
-        for tr in self._tracks:
-            if tr.times[-1] != t:
-                tr.missed()
-        # New surfaces: three echoes no track took, in a line over the last three pulses, or faint lines.
-        self._fresh = self._fresh[-2:] + [(t, fresh, clutter, mean_strength)]
+        for tr in (tr for tr in self._tracks if tr.times[-1] != t):
+            tr.missed()
+        # New surfaces: three echoes no track took (or lent), in a line over the last three pulses, or faint lines.
+        self._fresh = self._fresh[-2:] + [(t, fresh, clutter, mean_strength, sorted(lent))]
         born = initiate(self._fresh, pace=behind) + seeded
         self._tracks += born
-        updated += born
+        updated += lifted + born
         for tr in (tr for tr in updated if tr.closed_in(0.8) >= self.approach_m):
             tr.approached_at = t
         # Only a surface being approached can need an alert: the fits are for those.
@@ -660,8 +659,8 @@ class BoundaryMonitor:
                     id(tr) in provisional and tr.ahead_with(t_pulse, provisional[id(tr)], self.miss_m, self._still))):
                 self._oldest_approach = min(self._oldest_approach, tr.approached_at)
                 level = self._level_for(d_now, ttc, aside)
-            elif (len(tr.times) >= 5 and closing >= 0.5 and at - tr.times[-5] < 0.45 and tr.score >= _LOOMING
-                  and (d_rt := d - closing * (self.latency_s or 0.0)) < self.caution_m and d_rt / closing < 0.75
+            elif (len(tr.times) >= (_LOOMING_LENT if tr.lent else 5) and closing >= 0.5 and at - tr.times[-5] < 0.45
+                  and tr.score >= _LOOMING and (d_rt := d - closing * (self.latency_s or 0.0)) < self.caution_m and d_rt / closing < 0.75
                   and (bend := tr.straight(8))[0] < 0.005 and bend[1] < 0.03
                   and (behind <= closing or d * d * (1.0 - (closing / behind) ** 2) < self.miss_m ** 2)):
                 # Not yet in the way by the fit (it needs a third of a second), but near (nearer by the round trip's walk),
@@ -696,5 +695,6 @@ _RANK = {"clear": 0, "caution": 1, "stop": 2}
 _TRUE = np.ones(8192, bool)  # every sample sound: the usual block's mask, never written to
 _ASIDE_TTC = 0.75  # (of caution_ttc_s, for a surface aside: a wall met at under 30 degrees, grazed)
 _PACE_MAX_MPS, _RECEDING_MPS = 2.0, 0.1  # the fastest a wearer walks (the envelope's); receding faster starts no alert
-_LOOMING = 12.0  # the track score from which a surface nearing fast and close cautions before the fit
+_PACE_SURE = 1.1  # echoes lent (tracks.initiate) while nothing nears over 10 % faster than the walls behind recede
+_LOOMING, _LOOMING_LENT = 12.0, 8  # the score to caution before the fit (near, nearing fast); the echoes a lent track needs
 _STAGE = 441  # smaller blocks are gathered to that many (10 ms at 44.1 kHz: 16 samples cost what 480 do)
