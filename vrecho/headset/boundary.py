@@ -414,12 +414,6 @@ class BoundaryMonitor:
         d = self._lock.delay
         return None if d is None else max(d / self.fs - self._mic[0] / SPEED_OF_SOUND, 0.0)
 
-    def _stale_s(self, t_pulse: float) -> float:
-        """Seconds from a pulse's emission to now, as the monitor must reckon them: the sooner
-        of its two ends, so the pulse left when it was written (the round trip wholly on the
-        microphone's side), the wearer having moved on since."""
-        return max(self._now / self.fs - t_pulse, 0.0)
-
     def see(self, image, depth, intrinsics, *, model=None) -> str | None:
         """Show the monitor the headset camera's latest frame: what the surfaces ahead are.
 
@@ -652,7 +646,9 @@ class BoundaryMonitor:
             d = provisional.get(id(tr), tr.dists[-1])
             at = t_pulse if id(tr) in provisional else tr.times[-1]
             closing = -v if v is not None else 0.0
-            d_now = d - max(closing, 0.0) * self._stale_s(at)  # where the wearer may be by now
+            # Where the wearer may be by now: the pulse reckoned to have left when it was written (the round trip wholly
+            # on the microphone's side, the sooner of its two ends), the wearer having moved on since.
+            d_now = d - max(closing, 0.0) * max(t_now - at, 0.0)
             ttc = d_now / closing if closing > 0.05 else np.inf
             aside = closing < 0.5 * pace
             if t_now - tr.approached_at <= 1.0 and (tr.ahead or (
@@ -662,11 +658,14 @@ class BoundaryMonitor:
             elif (len(tr.times) >= (_LOOMING_LENT if tr.lent else 5) and closing >= 0.5 and at - tr.times[-5] < 0.45
                   and tr.score >= _LOOMING and (d_rt := d - closing * (self.latency_s or 0.0)) < self.caution_m and d_rt / closing < 0.75
                   and (bend := tr.straight(8))[0] < 0.005 and bend[1] < 0.03
-                  and (behind <= closing or d * d * (1.0 - (closing / behind) ** 2) < self.miss_m ** 2)):
+                  and ((abs(closing - behind) <= 0.1 * behind and pace <= _PACE_SURE * behind) if tr.lent
+                       else behind <= closing or d * d * (1.0 - (closing / behind) ** 2) < self.miss_m ** 2)):
                 # Not yet in the way by the fit (it needs a third of a second), but near (nearer by the round trip's walk),
                 # nearing fast and steadily beyond doubt (the score; the last eight echoes on a line within 5 mm, where a still
                 # wall's track that took other headsets' pings bends, the newest within 3 cm: no stray peak just taken; five in
                 # 0.45 s), and not passing by: nearing at c as walls behind recede at v, it lies d sqrt(1 - (c/v)^2) off the way.
+                # But v may be under the pace (walls behind met at an angle): a track started on lent echoes (the stray lines and
+                # passers-by those may start) needs eight echoes, c within 10 % of v, and the pace sure (_PACE_SURE).
                 level = "caution"
             else:
                 continue  # not known to be in the way (asked again with the echo still arriving, if any)
@@ -695,6 +694,6 @@ _RANK = {"clear": 0, "caution": 1, "stop": 2}
 _TRUE = np.ones(8192, bool)  # every sample sound: the usual block's mask, never written to
 _ASIDE_TTC = 0.75  # (of caution_ttc_s, for a surface aside: a wall met at under 30 degrees, grazed)
 _PACE_MAX_MPS, _RECEDING_MPS = 2.0, 0.1  # the fastest a wearer walks (the envelope's); receding faster starts no alert
-_PACE_SURE = 1.1  # echoes lent (tracks.initiate) while nothing nears over 10 % faster than the walls behind recede
+_PACE_SURE = 1.1  # the pace sure: nothing nears over 10 % faster than the walls behind recede (lending, tracks.initiate)
 _LOOMING, _LOOMING_LENT = 12.0, 8  # the score to caution before the fit (near, nearing fast); the echoes a lent track needs
 _STAGE = 441  # smaller blocks are gathered to that many (10 ms at 44.1 kHz: 16 samples cost what 480 do)
