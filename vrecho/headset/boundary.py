@@ -28,6 +28,7 @@ seed (a faint tick), and:
    pings crowd the range, one echo says nothing of its speed), or from a line of faint echoes summed
    along each approach over eight pulses (:mod:`.faint`), which also keep a track that missed one.
    A track closing at the wearer's pace (the walls behind recede at it) weighs as a surface ahead.
+   Lines at that pace may start on echoes tracks off it took (lent: :func:`~.tracks.initiate`).
 3. **Alerts with hysteresis.** Only surfaces the wearer moves toward count (``approach_m``
    nearer within 0.8 s, in the last second) and will not pass by: a point at lateral offset
    ``a`` nears as d(t)^2 = (v (t_c - t))^2 + a^2, so a quadratic fit over the last 0.3 to 0.6 s
