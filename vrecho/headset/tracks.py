@@ -159,6 +159,10 @@ class Track:
         :attr:`confirmed` above :data:`CONFIRMED`.
     cov : tuple of float
         The filter's covariance of distance and speed at the last echo: (m^2, m^2/s, m^2/s^2).
+    lent : bool
+        Started on an echo another track took (:func:`initiate`'s lending): a stray line or a
+        passer-by more often than one started on echoes no track took, so the monitor asks more of
+        it before it cautions ahead of the fit.
     """
 
     times: deque = field(default_factory=lambda: deque(maxlen=64))
@@ -522,9 +526,10 @@ def initiate(pulses, *, tolerance_m: float = 0.006, approach_mps: float = _APPRO
     nearing at another speed, a person passing) is lent to the lines at the pace: with others'
     pings, noise and people, some 30 peaks a pulse, a wall's echoes walked toward at 1.7 m/s went
     to such tracks wherever they crossed them, and its own track started at 0.77 m (one of seed
-    5000's all-at-once walks; over all 90 of them, 72 cautioned in time without the lending, 75
-    with it, no false alarm either way in 39). Only tracks closing :data:`LEND_MPS` and more off the pace
-    lend theirs.
+    5000's all-at-once walks; over all 90 of them, 72 cautioned in time without the lending, 74
+    with it and the monitor's gates on it, no false alarm either way in 39). Only tracks closing
+    :data:`LEND_MPS` and more off the pace lend theirs; a track started on a lent echo says so
+    (:attr:`Track.lent`).
 
     Parameters
     ----------
