@@ -585,12 +585,11 @@ def initiate(pulses, *, tolerance_m: float = 0.006, approach_mps: float = _APPRO
 
 
 def _remove(chosen) -> None:
-    """Take the lines' echoes out of the lists they came from (each an echo of one line at most,
-    the newest of two)."""
-    for i in range(3):
-        for lst in {id(x[i][2]): x[i][2] for x in chosen}.values():
-            used = {(x[i][0], x[i][1]) for x in chosen if x[i][2] is lst}
-            lst[:] = [e for e in lst if e not in used]
+    """Take the lines' echoes out of the lists they came from (a newest echo may be in two lines)."""
+    for line in chosen:
+        for d, strength, lst in line:
+            if (d, strength) in lst:
+                lst.remove((d, strength))
 
 
 def associate(tracks: list, t: float, echoes) -> list[tuple[Track | None, float, float]]:
