@@ -225,19 +225,23 @@ def envelope_room(args):
     cap, ref = sim.captures[k], sim.images[k, :, 0]
     base = [si_sdr(ref[j], cap.audio[0]) for j in range(n)]
     for name, pos in (("located", located), ("true", true)):
-        gains, out, kept, before, distinct, share, remixed = ([float("nan")] * n for _ in range(7))
+        gains, out, kept, before, distinct, share, remixed, spatial, unspatial = ([float("nan")] * n for _ in range(9))
         have = np.all(np.isfinite(pos), axis=1)
         if have.any():
             sep = informed(cap, pos[have], guard=False)  # every track; the guard's verdict and weight beside it
             unmixed = track_weights(sep.distinct, sep.share, np.full(len(sep.share), np.inf)) > 0  # the guard before the remix's bound
+            w_unspatial = track_weights(sep.distinct, sep.share, sep.remixed)  # ... and before the spatial fit's
             for i, j in enumerate(np.flatnonzero(have)):
                 gains[j] = si_sdr(ref[j], sep.signals[i]) - base[j]
                 w = float(sep.weight[i])  # what the guard gives: the track mixed with microphone 0
                 out[j] = si_sdr(ref[j], mix_back(cap.audio[0], sep.signals[i], w)) - base[j] if w > 0 else 0.0
+                w = float(w_unspatial[i])
+                unspatial[j] = si_sdr(ref[j], mix_back(cap.audio[0], sep.signals[i], w)) - base[j] if w > 0 else 0.0
                 kept[j], before[j], distinct[j], share[j] = w > 0, bool(unmixed[i]), float(sep.distinct[i]), float(sep.share[i])
-                remixed[j] = float(sep.remixed[i])
+                remixed[j], spatial[j] = float(sep.remixed[i]), float(sep.spatial[i])
         row[f"gain_{name}_db"], row[f"kept_{name}"], row[f"distinct_{name}"], row[f"share_{name}"] = gains, kept, distinct, share
         row[f"guarded_{name}_db"], row[f"kept_before_{name}"], row[f"remixed_{name}"] = out, before, remixed
+        row[f"spatial_{name}"], row[f"guarded_unspatial_{name}_db"] = spatial, unspatial
     row["time_s"] = time.perf_counter() - t0
     return row
 
@@ -261,17 +265,20 @@ def report_envelope(rows: list[dict]) -> str:
         raw, guarded, kept = gains("located")
         _, before, _ = gains("located", "kept_before")
         _, true_guarded, _ = gains("true")
+        unspatial = np.array([x if np.isfinite(x) else 0.0 for r in sel for x in r.get("guarded_unspatial_located_db", [np.nan] * len(r["sounds"]))])
         return (f"{len(sel)} / {len(pos)} | {np.median(pos):.2f} | {np.median(hor):.2f} | {np.mean(pos < 0.5):.0%} | "
                 f"{np.mean(pos[ok] <= 2 * unc[ok]):.0%} | {np.mean([r['count_found'] == len(r['sounds']) for r in sel]):.0%} | "
                 f"{np.median(guarded):+.1f} / {np.mean(guarded >= 0):.0%} / {np.mean(guarded):+.2f} | {np.mean(kept):.0%} | "
+                f"{np.median(unspatial):+.1f} / {np.mean(unspatial >= 0):.0%} / {np.mean(unspatial):+.2f} | "
                 f"{np.median(before):+.1f} / {np.mean(before >= 0):.0%} / {np.mean(before):+.2f} | "
                 f"{np.median(raw):+.1f} / {np.mean(raw >= 0):.0%} | {np.median(true_guarded):+.1f} / {np.mean(true_guarded >= 0):.0%} | "
                 f"{np.mean([r['locate_s'] / r['poses'] for r in sel]):.1f} s")
     lines = ["| condition | walks / sources | 3-D median m | horizontal median m | within 0.5 m | error within 2 x uncertainty | "
              "count right | SI-SDR gain median / >= 0 dB / mean | tracks kept by the guard | "
+             "the guard without the spatial fit: median / >= 0 dB / mean | "
              "the guard without the remix: median / >= 0 dB / mean | unguarded: median / >= 0 dB | "
              "true positions (guarded): median / >= 0 dB | locate per capture |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     by = {}
     for r in rows:
         by.setdefault(r["condition"], []).append(r)

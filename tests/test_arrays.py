@@ -213,3 +213,28 @@ def test_a_kept_track_weighs_against_the_microphone_as_its_remix_says():
     mic, tracks = np.arange(3.0), np.array([[5.0, 5, 5], [1, 1, 1], [2, 4, 6]])
     mixed = mix_back(mic, tracks, np.array([0.0, 1.0, 0.5]))  # what informed gives: each track with the microphone
     assert np.array_equal(mixed, [mic, tracks[1], [1, 2.5, 4]]) and np.array_equal(mix_back(mic, tracks[2], 0.5), mixed[2])
+
+
+def test_a_track_whose_sound_points_at_another_source_is_told_by_its_spatial_fit():
+    """spatial_fit: two sources' sounds through their own steering vectors, each bin given to the
+    one that is loudest there; read at the right positions each track points at its own (fit
+    near +1), with the positions swapped at the other's (near -1); and the guard's bound on it
+    gives the microphone."""
+    from localization.separate import GUARD, spatial_fit, track_weights
+
+    rng = np.random.default_rng(0)
+    mics = np.array([[0.0, 0, 0], [0.09, 0, 0], [0, 0.05, 0], [0.09, 0.05, 0]])
+    sources = np.array([[2.0, 1.0, 0.3], [-1.0, 2.0, -0.2]])
+    freqs = np.linspace(0, 8000, 129)
+    dist = np.linalg.norm(mics[:, None] - sources[None], axis=-1)  # (M, K)
+    A = (dist[:1] / dist)[None] * np.exp(-2j * np.pi * freqs[:, None, None] * (dist - dist[:1])[None] / 343.0)
+    S = rng.normal(size=(200, 129, 2)) + 1j * rng.normal(size=(200, 129, 2))  # each source's spectrum
+    S *= np.where(rng.random((200, 129, 2)) < 0.5, 1.0, 0.05)  # sparse: each bin mostly one source's
+    X = np.einsum("fmk,tfk->tfm", A, S) + 0.01 * (rng.normal(size=(200, 129, 4)) + 1j * rng.normal(size=(200, 129, 4)))
+    share = np.abs(S) ** 2 / np.sum(np.abs(S) ** 2, axis=-1, keepdims=True)
+    right, swapped = spatial_fit(X, A, share, freqs), spatial_fit(X, A[..., ::-1], share, freqs)
+    assert np.all(right > 0.5) and np.all(swapped < -0.5)
+    ok = np.ones(2)
+    assert np.all(track_weights(ok, ok, np.full(2, 20.0), right) > 0)
+    assert np.all(track_weights(ok, ok, np.full(2, 20.0), swapped) == 0)  # the microphone
+    assert swapped.max() < GUARD["spatial"] < right.min()
