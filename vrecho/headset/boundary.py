@@ -538,10 +538,11 @@ class BoundaryMonitor(Judge):
         behind = min(max(self._behind, 0.0), PACE_MAX_MPS)  # the wearer's pace as the walls behind recede (Track.update)
         mean_strength = clutter_strength(echoes)
         fresh, lent, near = [], [], sorted(d for d, _ in echoes)
+        lending = self._pace_sure(behind)  # (initiate's lines at the pace borrow echoes only while it is sure)
         for tr, d, strength in associate(self._tracks, t, echoes):
             if tr is None or abs(d - tr.predict(t)) > 0.5 * tr.gate_m:  # (taken far off its track's line: may
                 fresh.append((d, strength))  # be another surface's, whose range the track crossed, and start its own)
-            elif abs((tr.speed or 0.0) + behind) > LEND_MPS and self._pace_sure(behind):  # (initiate's lines at it)
+            elif lending and abs((tr.speed or 0.0) + behind) > LEND_MPS:
                 lent.append((d, strength))
             if tr is not None:
                 tr.update(t, d, strength, clutter_per_m=crowding(near, d, clutter), clutter_strength=mean_strength, pace=behind)
