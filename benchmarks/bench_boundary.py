@@ -74,6 +74,7 @@ echo levels against the outcome, and ``--compare LABEL=DIR ...`` sets such runs 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import platform
 import signal
@@ -638,6 +639,8 @@ def main() -> None:
     unknown = set(rows) - set(ROWS)
     if unknown:
         ap.error(f"unknown rows {sorted(unknown)}; known: {', '.join(ROWS)}")
+    if args.held_out and importlib.util.find_spec("rir_generator") is None:  # (said now, not after the other rows' hour)
+        ap.error("--held-out runs rir-generator's rooms: pip install -e '.[bench]'")
     started = time.time()
     results = []
     with ProcessPoolExecutor(args.jobs) as pool:
