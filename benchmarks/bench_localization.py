@@ -235,8 +235,8 @@ def envelope_room(args):
                 gains[j] = si_sdr(ref[j], sep.signals[i]) - base[j]
                 w = float(sep.weight[i])  # what the guard gives: the track mixed with microphone 0
                 out[j] = si_sdr(ref[j], mix_back(cap.audio[0], sep.signals[i], w)) - base[j] if w > 0 else 0.0
-                w = float(w_unspatial[i])
-                unspatial[j] = si_sdr(ref[j], mix_back(cap.audio[0], sep.signals[i], w)) - base[j] if w > 0 else 0.0
+                u = float(w_unspatial[i])
+                unspatial[j] = si_sdr(ref[j], mix_back(cap.audio[0], sep.signals[i], u)) - base[j] if u > 0 else 0.0
                 kept[j], before[j], distinct[j], share[j] = w > 0, bool(unmixed[i]), float(sep.distinct[i]), float(sep.share[i])
                 remixed[j], spatial[j] = float(sep.remixed[i]), float(sep.spatial[i])
         row[f"gain_{name}_db"], row[f"kept_{name}"], row[f"distinct_{name}"], row[f"share_{name}"] = gains, kept, distinct, share
