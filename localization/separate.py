@@ -348,11 +348,11 @@ def informed(capture: Capture, positions: np.ndarray, *, guard: bool = True) -> 
     X = analysis(audio, nfft)
     freqs = np.fft.rfftfreq(nfft, 1 / fs)
     A = steering(capture, positions, freqs)
-    out, share, remix = _images(X, A)
+    out, share, remix, covs = _images(X, A)
     # The remix: the tracks' own images summed, separated again; how much of each track comes back
     # (its SI-SDR gain over the remix's microphone 0) says whether the network and the filter knew
     # the source or guessed (Informed.remixed).
-    again, _, _ = _images(remix, A)
+    again = _images(remix, A)[0]
     length = audio.shape[1]
     mine, back = synthesis(out, length, nfft), synthesis(again, length, nfft)
     mix = synthesis(remix[..., :1], length, nfft)[0]
@@ -373,7 +373,7 @@ def informed(capture: Capture, positions: np.ndarray, *, guard: bool = True) -> 
         top = freqs >= 6000
         rho = np.einsum("tf,tfk->k", power[:, top], share[:, top]) / (power[:, top].sum() + 1e-30)
         y = y + rho[:, None] * high[None]
-    spatial = spatial_fit(X, A, share, freqs)
+    spatial = spatial_fit(covs, A, freqs)
     weight = track_weights(distinct, mass, remixed, spatial)
     if guard:
         y = mix_back(capture.audio[0], y, weight)
@@ -383,25 +383,40 @@ def informed(capture: Capture, positions: np.ndarray, *, guard: bool = True) -> 
 def _images(X: np.ndarray, A: np.ndarray):
     """The multichannel Wiener filter on the network's shares (the module's docstring).
 
-    Returns each source's spectrum at microphone 0 (T, F, K), the shares (T, F, K) and the sum
-    of the sources' images at every microphone (T, F, M): the remix."""
+    Returns each source's spectrum at microphone 0 (T, F, K), the shares (T, F, K), the sum
+    of the sources' images at every microphone (T, F, M) (the remix), and the sources' spatial
+    covariances (K, F, M, M) (:func:`covariances`)."""
     share = masknet.source_masks(X, A)
     n_frames, _, m = X.shape
     Rx = np.einsum("tfm,tfn->fmn", X, np.conj(X)) / n_frames
     iRx = np.linalg.inv(Rx + 1e-9 * np.trace(Rx, axis1=-2, axis2=-1).real.mean() * np.eye(m))
     out = np.zeros(share.shape, dtype=complex)
     remix = np.zeros(X.shape, dtype=complex)
+    covs = covariances(X, share)
     for k in range(share.shape[-1]):
-        Rk = _covariance(X, share[..., k])
-        img = np.einsum("fin,tfn->tfi", Rk @ iRx, X) * np.sqrt(share[..., k])[..., None]
+        img = np.einsum("fin,tfn->tfi", covs[k] @ iRx, X) * np.sqrt(share[..., k])[..., None]
         out[..., k] = img[..., 0]
         remix += img
-    return out, share, remix
+    return out, share, remix, covs
 
 
-def _covariance(X: np.ndarray, share: np.ndarray) -> np.ndarray:
-    """A source's spatial covariance (F, M, M) from the mixture's STFT (T, F, M) and its shares (T, F)."""
-    return np.einsum("tf,tfm,tfn->fmn", share ** 2, X, np.conj(X)) / X.shape[0]
+def covariances(X: np.ndarray, share: np.ndarray) -> np.ndarray:
+    """Each source's spatial covariance, as its shares gather it from the mixture (what
+    :func:`informed`'s Wiener filter separates it by).
+
+    Parameters
+    ----------
+    X : numpy.ndarray [shape=(T, F, M), dtype=complex]
+        The capture's STFT (:func:`analysis`).
+    share : numpy.ndarray [shape=(T, F, K)]
+        Each bin's share of each source (:func:`localization.masknet.source_masks`).
+
+    Returns
+    -------
+    numpy.ndarray [shape=(K, F, M, M), dtype=complex]
+    """
+    return np.stack([np.einsum("tf,tfm,tfn->fmn", share[..., k] ** 2, X, np.conj(X)) / X.shape[0]
+                     for k in range(share.shape[-1])])
 
 
 SPATIAL_MIN_HZ = 200.0
@@ -409,12 +424,11 @@ SPATIAL_MIN_HZ = 200.0
 direction alike)."""
 
 
-def spatial_fit(X: np.ndarray, A: np.ndarray, share: np.ndarray, freqs: np.ndarray) -> np.ndarray:
+def spatial_fit(covs: np.ndarray, A: np.ndarray, freqs: np.ndarray) -> np.ndarray:
     """How much better each source's separated sound points at its own position than at any other
     source's.
 
-    The source's spatial covariance, as its shares gather it from the mixture (what the Wiener
-    filter separates it by), has a principal direction at each frequency; where the network gave
+    The source's spatial covariance (:func:`covariances`) has a principal direction at each frequency; where the network gave
     the source another's bins (a wrong or missing position, two sources the mask confused), that
     direction is the other source's. The fit at a frequency is |u^H a|^2, u the principal
     eigenvector and a a source's steering vector (unit norm); the result is the source's own fit
@@ -425,12 +439,10 @@ def spatial_fit(X: np.ndarray, A: np.ndarray, share: np.ndarray, freqs: np.ndarr
 
     Parameters
     ----------
-    X : numpy.ndarray [shape=(T, F, M), dtype=complex]
-        The capture's STFT (:func:`analysis`).
+    covs : numpy.ndarray [shape=(K, F, M, M), dtype=complex]
+        The sources' spatial covariances (:func:`covariances`).
     A : numpy.ndarray [shape=(F, M, K), dtype=complex]
         The sources' steering vectors (:func:`steering`), K >= 2.
-    share : numpy.ndarray [shape=(T, F, K)]
-        Each bin's share of each source (:func:`localization.masknet.source_masks`).
     freqs : numpy.ndarray [shape=(F,)]
         The bins' frequencies in Hz.
 
@@ -439,10 +451,10 @@ def spatial_fit(X: np.ndarray, A: np.ndarray, share: np.ndarray, freqs: np.ndarr
     numpy.ndarray [shape=(K,)]
     """
     band = freqs >= SPATIAL_MIN_HZ
-    Xb, An = X[:, band], A[band] / np.linalg.norm(A[band], axis=1, keepdims=True)
+    An = A[band] / np.linalg.norm(A[band], axis=1, keepdims=True)
     out = np.zeros(A.shape[-1])
     for k in range(A.shape[-1]):
-        Rk = _covariance(Xb, share[:, band, k])
+        Rk = covs[k][band]
         u = np.linalg.eigh(Rk)[1][..., -1]  # (F, M): the principal direction
         fit = np.abs(np.einsum("fm,fmk->fk", np.conj(u), An)) ** 2
         tells = 1.0 - np.delete(np.abs(np.einsum("fm,fmj->fj", np.conj(An[..., k]), An)), k, axis=1).max(axis=1) ** 2

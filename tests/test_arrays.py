@@ -220,7 +220,7 @@ def test_a_track_whose_sound_points_at_another_source_is_told_by_its_spatial_fit
     one that is loudest there; read at the right positions each track points at its own (fit
     near +1), with the positions swapped at the other's (near -1); and the guard's bound on it
     gives the microphone."""
-    from localization.separate import GUARD, spatial_fit, track_weights
+    from localization.separate import GUARD, covariances, spatial_fit, track_weights
 
     rng = np.random.default_rng(0)
     mics = np.array([[0.0, 0, 0], [0.09, 0, 0], [0, 0.05, 0], [0.09, 0.05, 0]])
@@ -232,7 +232,8 @@ def test_a_track_whose_sound_points_at_another_source_is_told_by_its_spatial_fit
     S *= np.where(rng.random((200, 129, 2)) < 0.5, 1.0, 0.05)  # sparse: each bin mostly one source's
     X = np.einsum("fmk,tfk->tfm", A, S) + 0.01 * (rng.normal(size=(200, 129, 4)) + 1j * rng.normal(size=(200, 129, 4)))
     share = np.abs(S) ** 2 / np.sum(np.abs(S) ** 2, axis=-1, keepdims=True)
-    right, swapped = spatial_fit(X, A, share, freqs), spatial_fit(X, A[..., ::-1], share, freqs)
+    covs = covariances(X, share)
+    right, swapped = spatial_fit(covs, A, freqs), spatial_fit(covs, A[..., ::-1], freqs)
     assert np.all(right > 0.5) and np.all(swapped < -0.5)
     ok = np.ones(2)
     assert np.all(track_weights(ok, ok, np.full(2, 20.0), right) > 0)
