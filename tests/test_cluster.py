@@ -61,8 +61,10 @@ def test_ray_generation_resumed_after_ctrl_c_is_the_local_run_bit_for_bit(tiny_d
     anew: a cache of its own)."""
     out, cache = tmp_path / "ds", tmp_path / "cache"
     argv = ["generate", "--out", out, "--cache", cache, "--ray", "--quiet"]
-    code, err = _interrupt_when(argv, lambda: (out / "progress").is_dir() and any((out / "progress").iterdir()))
-    done = len(list((out / "progress").iterdir()))
+    def rooms_done():  # (a room's file whole: the temporary file it is written to first is not one)
+        return sorted((out / "progress").glob("scene_*.csv"))
+    code, err = _interrupt_when(argv, lambda: bool(rooms_done()))
+    done = len(rooms_done())
     assert code == 130 and err.strip().splitlines()[-1].startswith("vrecho: interrupted"), err
     assert 1 <= done < 6 and not (out / "labels.csv").exists()  # some rooms kept, the dataset unfinished
     r = run_cli(*argv)
