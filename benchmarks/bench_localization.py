@@ -122,13 +122,14 @@ def one_room(args):
     preds = clf.predict_batch(frames.astype(np.float32), 44100)
     row["echocnn_position_m"] = [float(np.min(np.linalg.norm(true - (pose.emitter + pose.rotation @ np.array(p.source_m)), axis=1)))
                                  for pose, p in zip(sim.poses, preds)]
-    row["sdr"], row["sir"], row["time_s"]["sep"], row["failed"] = _separation(sim, true, loc.positions, 4)
+    row["sdr"], row["sir"], row["time_s"]["sep"], row["failed"] = _separation(sim, true, loc.positions, 4, loc.uncertainty_m)
     return row
 
 
-def _separation(sim, true: np.ndarray, located: np.ndarray, k: int):
+def _separation(sim, true: np.ndarray, located: np.ndarray, k: int, uncertainty_m: np.ndarray):
     """SDR and SIR improvement of every method on capture ``k`` (dicts by method), each
-    method's time, and the methods that failed (counted as the mixture)."""
+    method's time, and the methods that failed (counted as the mixture); informed separation at
+    the located positions reads their uncertainty, as :func:`localization.place_sources` does."""
     from localization import separate
     from localization.separate import METHODS
     from vrecho.errors import VrechoError
@@ -141,7 +142,8 @@ def _separation(sim, true: np.ndarray, located: np.ndarray, k: int):
         t = time.perf_counter()
         try:
             est = separate(cap, n_src, method="informed" if method == "informed_true" else method,
-                           positions=true if method == "informed_true" else located)
+                           positions=true if method == "informed_true" else located,
+                           uncertainty_m=None if method == "informed_true" else uncertainty_m)
         except VrechoError:  # a method that fails on a room counts as no improvement there
             est = np.repeat(cap.audio[:1], n_src, axis=0)
             failed.append(method)
@@ -164,7 +166,7 @@ def target_room(args):
     room, sim = simulate_room(seed + TARGET_SEED_OFFSET + index, 2, TARGET_RT60)
     true = np.array([s.position for s in sim.sources])
     loc = locate(sim.captures, 2, bounds=((0, 0, 0), room.dims))
-    sdr, sir, times, failed = _separation(sim, true, loc.positions, 4)
+    sdr, sir, times, failed = _separation(sim, true, loc.positions, 4, loc.uncertainty_m)
     return {"room": index, "sounds": [s.name for s in sim.sources], "sdr": sdr, "sir": sir, "time_s": times, "failed": failed,
             "position_m": np.sort(np.linalg.norm(true[:, None] - loc.positions[None], axis=-1).min(axis=1)).tolist()}
 
@@ -180,7 +182,9 @@ def envelope_room(args):
     given (3-D and horizontal errors, the reported uncertainty), the count estimated, and the SI-SDR
     gain over microphone 0 of each source's informed separation (located and true positions) on
     the walk's middle capture: every track as separated, and as the guard gives it (microphone 0,
-    or the track mixed with it: :func:`localization.separate.track_weights`)."""
+    or the track mixed with it: :func:`localization.separate.track_weights`; at the located positions
+    with their uncertainty, as :func:`localization.place_sources` passes it), and as the guard would
+    give it without its spatial fit's bound, or without its uncertainty's."""
     condition, seed = args
     import torch
 
@@ -225,22 +229,24 @@ def envelope_room(args):
     cap, ref = sim.captures[k], sim.images[k, :, 0]
     base = [si_sdr(ref[j], cap.audio[0]) for j in range(n)]
     for name, pos in (("located", located), ("true", true)):
-        gains, out, kept, before, distinct, share, remixed, spatial, unspatial = ([float("nan")] * n for _ in range(9))
+        gains, out, kept, unsure, distinct, share, remixed, spatial, unspatial = ([float("nan")] * n for _ in range(9))
         have = np.all(np.isfinite(pos), axis=1)
         if have.any():
-            sep = informed(cap, pos[have], guard=False)  # every track; the guard's verdict and weight beside it
-            unmixed = track_weights(sep.distinct, sep.share, np.full(len(sep.share), np.inf)) > 0  # the guard before the remix's bound
-            w_unspatial = track_weights(sep.distinct, sep.share, sep.remixed)  # ... and before the spatial fit's
+            u = unc[have] if name == "located" else None  # (the true positions are known)
+            sep = informed(cap, pos[have], guard=False, uncertainty_m=u)  # every track; the guard's verdict and weight beside it
+            w_unspatial = track_weights(sep.distinct, sep.share, sep.remixed, None, u)  # the guard without the spatial fit's bound
+            w_unsure = track_weights(sep.distinct, sep.share, sep.remixed, sep.spatial)  # ... without the uncertainty's
             for i, j in enumerate(np.flatnonzero(have)):
                 gains[j] = si_sdr(ref[j], sep.signals[i]) - base[j]
                 w = float(sep.weight[i])  # what the guard gives: the track mixed with microphone 0
                 out[j] = si_sdr(ref[j], mix_back(cap.audio[0], sep.signals[i], w)) - base[j] if w > 0 else 0.0
-                u = float(w_unspatial[i])
-                unspatial[j] = si_sdr(ref[j], mix_back(cap.audio[0], sep.signals[i], u)) - base[j] if u > 0 else 0.0
-                kept[j], before[j], distinct[j], share[j] = w > 0, bool(unmixed[i]), float(sep.distinct[i]), float(sep.share[i])
+                for other, ws in ((unspatial, w_unspatial), (unsure, w_unsure)):
+                    v = float(ws[i])
+                    other[j] = si_sdr(ref[j], mix_back(cap.audio[0], sep.signals[i], v)) - base[j] if v > 0 else 0.0
+                kept[j], distinct[j], share[j] = w > 0, float(sep.distinct[i]), float(sep.share[i])
                 remixed[j], spatial[j] = float(sep.remixed[i]), float(sep.spatial[i])
         row[f"gain_{name}_db"], row[f"kept_{name}"], row[f"distinct_{name}"], row[f"share_{name}"] = gains, kept, distinct, share
-        row[f"guarded_{name}_db"], row[f"kept_before_{name}"], row[f"remixed_{name}"] = out, before, remixed
+        row[f"guarded_{name}_db"], row[f"guarded_unsure_{name}_db"], row[f"remixed_{name}"] = out, unsure, remixed
         row[f"spatial_{name}"], row[f"guarded_unspatial_{name}_db"] = spatial, unspatial
     row["time_s"] = time.perf_counter() - t0
     return row
@@ -263,20 +269,20 @@ def report_envelope(rows: list[dict]) -> str:
                 return g, np.where(kept & np.isfinite(out), out, 0.0), kept
             return g, np.where(kept, g, 0.0), kept
         raw, guarded, kept = gains("located")
-        _, before, _ = gains("located", "kept_before")
         _, true_guarded, _ = gains("true")
-        unspatial = np.array([x if np.isfinite(x) else 0.0 for r in sel for x in r.get("guarded_unspatial_located_db", [np.nan] * len(r["sounds"]))])
+        unspatial, unsure = (np.array([x if np.isfinite(x) else 0.0 for r in sel for x in r.get(f"guarded_{key}_located_db", [np.nan] * len(r["sounds"]))])
+                             for key in ("unspatial", "unsure"))
         return (f"{len(sel)} / {len(pos)} | {np.median(pos):.2f} | {np.median(hor):.2f} | {np.mean(pos < 0.5):.0%} | "
                 f"{np.mean(pos[ok] <= 2 * unc[ok]):.0%} | {np.mean([r['count_found'] == len(r['sounds']) for r in sel]):.0%} | "
                 f"{np.median(guarded):+.1f} / {np.mean(guarded >= 0):.0%} / {np.mean(guarded):+.2f} | {np.mean(kept):.0%} | "
                 f"{np.median(unspatial):+.1f} / {np.mean(unspatial >= 0):.0%} / {np.mean(unspatial):+.2f} | "
-                f"{np.median(before):+.1f} / {np.mean(before >= 0):.0%} / {np.mean(before):+.2f} | "
+                f"{np.median(unsure):+.1f} / {np.mean(unsure >= 0):.0%} / {np.mean(unsure):+.2f} | "
                 f"{np.median(raw):+.1f} / {np.mean(raw >= 0):.0%} | {np.median(true_guarded):+.1f} / {np.mean(true_guarded >= 0):.0%} | "
                 f"{np.mean([r['locate_s'] / r['poses'] for r in sel]):.1f} s")
     lines = ["| condition | walks / sources | 3-D median m | horizontal median m | within 0.5 m | error within 2 x uncertainty | "
              "count right | SI-SDR gain median / >= 0 dB / mean | tracks kept by the guard | "
              "the guard without the spatial fit: median / >= 0 dB / mean | "
-             "the guard without the remix: median / >= 0 dB / mean | unguarded: median / >= 0 dB | "
+             "the guard without the uncertainty bound: median / >= 0 dB / mean | unguarded: median / >= 0 dB | "
              "true positions (guarded): median / >= 0 dB | locate per capture |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     by = {}

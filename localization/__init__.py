@@ -38,7 +38,8 @@ def place_sources(captures, n_sources: int | None = None, *, bounds=None, method
                   progress: bool = False) -> list[PlacedSource]:
     """The sources heard across ``captures``: where each is and what it plays.
 
-    Positions from :func:`locate`; each capture is separated with ``method`` and each source's
+    Positions from :func:`locate`; each capture is separated with ``method`` (``informed``: steered by
+    the positions, its guard reading their uncertainty) and each source's
     stretches are joined in capture order with short crossfades (``CROSSFADE_S``, 50 ms) into
     one signal at the captures' rate (stretches that were not recorded are not invented: the
     track is the captures' stretches back to back). Blind methods' outputs are matched to the
@@ -98,7 +99,7 @@ def place_sources(captures, n_sources: int | None = None, *, bounds=None, method
     kept = np.zeros(k, int)
     for c in tqdm(captures, desc="separating", unit="capture", disable=not progress):
         if method == "informed":
-            sep = informed(c, located.positions)
+            sep = informed(c, located.positions, uncertainty_m=located.uncertainty_m)
             y, kept = sep.signals, kept + sep.separated
         else:  # blind outputs come in any order: match them to the positions
             y = separate(c, k, method=method)

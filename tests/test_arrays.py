@@ -198,11 +198,14 @@ def test_a_track_the_separation_cannot_take_back_out_of_its_own_remix_is_the_mic
     assert np.all((right.weight > 0.5) & (right.weight < 1)) and np.array_equal(raw.weight, right.weight)
     assert np.allclose(right.signals, cap.audio[0] + right.weight[:, None] * (raw.signals - cap.audio[0]))
     assert np.mean(gains(right)) > np.mean(gains(raw))
+    # Two sources' positions given with their uncertainty: the guard does not read it (track_weights: three or more).
+    unsure = informed(cap, np.array([s.position for s in sources]), uncertainty_m=[0.2, GUARD["uncertainty_m"] + 1])
+    assert np.array_equal(unsure.signals, right.signals)
 
 
 def test_a_kept_track_weighs_against_the_microphone_as_its_remix_says():
-    """track_weights: 0 where the guard gives the microphone, 1 for a lone source, and between
-    them rising with the remix's reading."""
+    """track_weights: 0 where the guard gives the microphone (a position placed less surely than
+    its bound among them), 1 for a lone source, and between them rising with the remix's reading."""
     from localization.separate import GUARD, mix_back, track_weights
 
     ok = np.ones(4)
@@ -210,6 +213,9 @@ def test_a_kept_track_weighs_against_the_microphone_as_its_remix_says():
     assert w[0] == 0.0 and w[3] == 1.0 and 0.6 < w[1] < w[2] < 1.0
     assert np.isclose(w[1], 1 / (1 + 10 ** (-(GUARD["remixed_db"] - GUARD["mix_back_db"]) / GUARD["mix_back_width_db"])))
     assert track_weights(np.array([0.0]), np.ones(1), np.array([30.0]))[0] == 0.0  # not distinct: the microphone
+    unsure = np.array([0.0, GUARD["uncertainty_m"], GUARD["uncertainty_m"] + 0.01, np.inf])  # (inf: unknown, not read)
+    assert (track_weights(ok, ok, np.full(4, 20.0), None, unsure) > 0).tolist() == [True, True, False, True]
+    assert np.all(track_weights(ok[:2], ok[:2], np.full(2, 20.0), None, unsure[1:3]) > 0)  # two sources: not read
     mic, tracks = np.arange(3.0), np.array([[5.0, 5, 5], [1, 1, 1], [2, 4, 6]])
     mixed = mix_back(mic, tracks, np.array([0.0, 1.0, 0.5]))  # what informed gives: each track with the microphone
     assert np.array_equal(mixed, [mic, tracks[1], [1, 2.5, 4]]) and np.array_equal(mix_back(mic, tracks[2], 0.5), mixed[2])

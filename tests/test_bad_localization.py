@@ -162,6 +162,13 @@ def test_checks_come_before_the_work():
         (lambda: separate(caps[0], 2, method="informed", positions=[[0, 0, 0], [np.inf, 0, 0]]), "positions"),
         (lambda: separate(caps[0], 2, method="informed", positions=[[0, 0, 0]]), "positions"),
         (lambda: separate(caps[0], 2, method="informed", positions=[["a", 0, 0], [0, 0, 0]]), "positions"),
+        (lambda: separate(caps[0], 2, method="informed", positions=[[1, 0, 0], [0, 1, 0]], uncertainty_m=[0.1]), "uncertainty_m"),
+        (lambda: separate(caps[0], 2, method="informed", positions=[[1, 0, 0], [0, 1, 0]], uncertainty_m=[0.1, -1]),
+         "uncertainty_m"),
+        (lambda: separate(caps[0], 2, method="informed", positions=[[1, 0, 0], [0, 1, 0]], uncertainty_m=[np.nan, 0.1]),
+         "uncertainty_m"),
+        (lambda: separate(caps[0], 2, method="informed", positions=[[1, 0, 0], [0, 1, 0]], uncertainty_m="sure"),
+         "uncertainty_m"),
         (lambda: separate(caps[0], 200, method="nmf"), "n_sources"),
         (lambda: separate(caps[0], None, method="nmf"), "n_sources"),
         (lambda: doa(caps[0], 1, method="SRP", n_grid=1), "n_grid"),  # was qhull's error
