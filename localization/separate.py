@@ -546,8 +546,9 @@ Chosen with a session's script on the envelope's tuning conditions at fresh seed
 SI-SDR gain +1.72 -> +1.79 dB (the bound on every count: 98.1 %, +2.01 dB); read beside it, the
 held-out conditions at seeds 190 000 + (36 walks, 85 tracks): 91.8 -> 97.6 %, +1.55 -> +2.25 dB
 (every count: 98.8 %, +1.39 dB). A bound on the angle the uncertainty spans seen from the capture
-did no better. The benchmark on a set never run before (seeds 250 000 +): held-out conditions 94 ->
-99 % (+1.46 -> +1.27 dB), tuning conditions 89 -> 97 % (+0.63 -> +1.29 dB). ``mix_back_db`` and ``mix_back_width_db``: :func:`track_weights`."""
+did no better. The benchmark on sets never run before: seeds 250 000 +, held-out conditions 94 -> 99 %
+(+1.46 -> +1.27 dB), tuning conditions 89 -> 97 % (+0.63 -> +1.29 dB); seeds 270 000 +, 97 -> 99 %
+(+3.22 -> +2.42 dB) and 88 -> 91 % (+1.14 -> +0.59 dB). ``mix_back_db`` and ``mix_back_width_db``: :func:`track_weights`."""
 
 
 def track_weights(distinct: np.ndarray, share: np.ndarray, remixed: np.ndarray, spatial=None,
