@@ -179,7 +179,8 @@ others never are: their pooled row is the held-out figure."""
 
 def envelope_room(args):
     """One walk of the envelope (:func:`vrecho.sim.arrays.envelope_walk`): positions with the count
-    given (3-D and horizontal errors, the reported uncertainty), the count estimated, and the SI-SDR
+    given (3-D and horizontal errors, the reported uncertainty), the count estimated and the positions
+    found with it (each source's error to the estimate matched to it; none matched: not found), and the SI-SDR
     gain over microphone 0 of each source's informed separation (located and true positions) on
     the walk's middle capture: every track as separated, and as the guard gives it (microphone 0,
     or the track mixed with it: :func:`localization.separate.track_weights`; at the located positions
@@ -224,7 +225,14 @@ def envelope_room(args):
         located[r] = loc.positions[c]
     row.update(position_m=err.tolist(), horizontal_m=err_h.tolist(), uncertainty_m=unc.tolist(), strength=strength.tolist(),
                agreement=loc.agreement)
-    row["count_found"] = len(locate(sim.captures, None, bounds=walk.bounds).positions)
+    free = locate(sim.captures, None, bounds=walk.bounds).positions  # the count estimated, as place_sources does by default
+    row["count_found"] = len(free)
+    err_free = np.full(n, np.inf)  # a source no estimate is matched to: not found
+    if len(free):
+        D = np.linalg.norm(true[:, None] - free[None], axis=-1)
+        r, c = linear_sum_assignment(D)
+        err_free[r] = D[r, c]
+    row["position_free_m"] = err_free.tolist()
     k = len(sim.captures) // 2
     cap, ref = sim.captures[k], sim.images[k, :, 0]
     base = [si_sdr(ref[j], cap.audio[0]) for j in range(n)]
@@ -272,19 +280,22 @@ def report_envelope(rows: list[dict]) -> str:
         _, true_guarded, _ = gains("true")
         unspatial, unsure = (np.array([x if np.isfinite(x) else 0.0 for r in sel for x in r.get(f"guarded_{key}_located_db", [np.nan] * len(r["sounds"]))])
                              for key in ("unspatial", "unsure"))
+        free = np.array([e for r in sel for e in r.get("position_free_m", [np.nan] * len(r["sounds"]))], float)
         return (f"{len(sel)} / {len(pos)} | {np.median(pos):.2f} | {np.median(hor):.2f} | {np.mean(pos < 0.5):.0%} | "
+                f"{np.mean(free < 0.5):.0%} | "
                 f"{np.mean(pos[ok] <= 2 * unc[ok]):.0%} | {np.mean([r['count_found'] == len(r['sounds']) for r in sel]):.0%} | "
                 f"{np.median(guarded):+.1f} / {np.mean(guarded >= 0):.0%} / {np.mean(guarded):+.2f} | {np.mean(kept):.0%} | "
                 f"{np.median(unspatial):+.1f} / {np.mean(unspatial >= 0):.0%} / {np.mean(unspatial):+.2f} | "
                 f"{np.median(unsure):+.1f} / {np.mean(unsure >= 0):.0%} / {np.mean(unsure):+.2f} | "
                 f"{np.median(raw):+.1f} / {np.mean(raw >= 0):.0%} | {np.median(true_guarded):+.1f} / {np.mean(true_guarded >= 0):.0%} | "
                 f"{np.mean([r['locate_s'] / r['poses'] for r in sel]):.1f} s")
-    lines = ["| condition | walks / sources | 3-D median m | horizontal median m | within 0.5 m | error within 2 x uncertainty | "
+    lines = ["| condition | walks / sources | 3-D median m | horizontal median m | within 0.5 m | "
+             "within 0.5 m, count estimated | error within 2 x uncertainty | "
              "count right | SI-SDR gain median / >= 0 dB / mean | tracks kept by the guard | "
              "the guard without the spatial fit: median / >= 0 dB / mean | "
              "the guard without the uncertainty bound: median / >= 0 dB / mean | unguarded: median / >= 0 dB | "
              "true positions (guarded): median / >= 0 dB | locate per capture |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     by = {}
     for r in rows:
         by.setdefault(r["condition"], []).append(r)

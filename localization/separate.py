@@ -25,8 +25,8 @@ Methods:
   separation cannot take back out of a remix of its own tracks (where it guessed), or whose
   sound, as its shares gather it, points at another source's position rather than its own
   (:func:`spatial_fit`), or, among three or more sources whose positions' uncertainty is given,
-  that was placed too unsurely to steer by; a track it keeps comes mixed with as much of microphone 0 as the remix
-  says it may be off (:func:`track_weights`).
+  that was placed too unsurely to steer by; a track it keeps comes mixed with as much of
+  microphone 0 as the remix says it may be off (:func:`track_weights`).
 
 Every method returns an array (k, samples), the capture's length, in the order of
 ``positions`` for ``informed``.
@@ -532,9 +532,9 @@ tuning walks (seeds 9000 +, 159 sources, 6 walks a tuning condition) tracks at o
 microphone 90.6 -> 95.6 % (mean gain +1.77 -> +1.79 dB); on the headset's rooms (seeds 7300 +)
 SDR gain +8.3 -> +7.8 dB in the median. The fit weighted by the source's power alone (low
 frequencies, where a small array hears every direction alike, dominating it) gave the walks 96 %
-but the headset +6.0 dB. ``uncertainty_m`` and ``uncertainty_sources``: where the positions' standard errors are given
-(:func:`informed`'s ``uncertainty_m``, as :func:`localization.place_sources` passes
-:func:`localization.locate`'s) and at least ``uncertainty_sources`` sources are separated, a
+but the headset +6.0 dB. ``uncertainty_m`` and ``uncertainty_sources``: where the positions'
+standard errors are given (:func:`informed`'s ``uncertainty_m``, as
+:func:`localization.place_sources` passes :func:`localization.locate`'s) and at least ``uncertainty_sources`` sources are separated, a
 source placed less surely than ``uncertainty_m`` metres gets microphone 0: the network and the
 filter steer by the positions, and a track steered by an unsure one passes the other bounds (the
 network is consistent with its own guess). With two sources an unsure position still serves: the
@@ -546,9 +546,10 @@ Chosen with a session's script on the envelope's tuning conditions at fresh seed
 SI-SDR gain +1.72 -> +1.79 dB (the bound on every count: 98.1 %, +2.01 dB); read beside it, the
 held-out conditions at seeds 190 000 + (36 walks, 85 tracks): 91.8 -> 97.6 %, +1.55 -> +2.25 dB
 (every count: 98.8 %, +1.39 dB). A bound on the angle the uncertainty spans seen from the capture
-did no better. The benchmark on sets never run before: seeds 250 000 +, held-out conditions 94 -> 99 %
-(+1.46 -> +1.27 dB), tuning conditions 89 -> 97 % (+0.63 -> +1.29 dB); seeds 270 000 +, 97 -> 99 %
-(+3.22 -> +2.42 dB) and 88 -> 91 % (+1.14 -> +0.59 dB). ``mix_back_db`` and ``mix_back_width_db``: :func:`track_weights`."""
+did no better. The benchmark on sets never run before: seeds 250 000 +, held-out conditions
+94 -> 99 % (+1.46 -> +1.27 dB), tuning conditions 89 -> 97 % (+0.63 -> +1.29 dB); seeds
+270 000 +, 97 -> 99 % (+3.22 -> +2.42 dB) and 88 -> 91 % (+1.14 -> +0.59 dB).
+``mix_back_db`` and ``mix_back_width_db``: :func:`track_weights`."""
 
 
 def track_weights(distinct: np.ndarray, share: np.ndarray, remixed: np.ndarray, spatial=None,
