@@ -268,14 +268,12 @@ def report_envelope(rows: list[dict]) -> str:
         unc = np.array([u for r in sel for u in r["uncertainty_m"]], float)
         ok = np.isfinite(unc) & np.isfinite(pos)
 
-        def gains(name, guard="kept"):  # every track, and as the guard leaves them (microphone 0: 0 dB); no source found: 0 dB
+        def gains(name):  # every track, and as the guard leaves them (microphone 0: 0 dB); no source found: 0 dB
             g = np.array([x for r in sel for x in r[f"gain_{name}_db"]], float)
-            kept = np.array([k is True for r in sel for k in r[f"{guard}_{name}"]])
+            kept = np.array([k is True for r in sel for k in r[f"kept_{name}"]])
             g = np.where(np.isfinite(g), g, 0.0)
-            if guard == "kept":  # the guard's output: each kept track mixed with microphone 0 (track_weights)
-                out = np.array([x for r in sel for x in r[f"guarded_{name}_db"]], float)
-                return g, np.where(kept & np.isfinite(out), out, 0.0), kept
-            return g, np.where(kept, g, 0.0), kept
+            out = np.array([x for r in sel for x in r[f"guarded_{name}_db"]], float)  # each kept track mixed with microphone 0
+            return g, np.where(kept & np.isfinite(out), out, 0.0), kept
         raw, guarded, kept = gains("located")
         _, true_guarded, _ = gains("true")
         unspatial, unsure = (np.array([x if np.isfinite(x) else 0.0 for r in sel for x in r.get(f"guarded_{key}_located_db", [np.nan] * len(r["sounds"]))])
