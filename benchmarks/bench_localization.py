@@ -40,6 +40,19 @@ TARGET_RT60, TARGET_SEED_OFFSET = 0.4, 300
 SEP_NAMES = {"informed": "vrecho informed (located positions)", "informed_true": "vrecho informed (true positions)"}
 
 
+def _matched(true: np.ndarray, found: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each true source's distance to the position matched to it (the assignment of least total
+    distance) and that position's index: inf and -1 where none is (fewer found than there are)."""
+    from scipy.optimize import linear_sum_assignment
+
+    err, idx = np.full(len(true), np.inf), np.full(len(true), -1)
+    if len(found):
+        D = np.linalg.norm(true[:, None] - found[None], axis=-1)
+        r, c = linear_sum_assignment(D)
+        err[r], idx[r] = D[r, c], c
+    return err, idx
+
+
 def _angles(true_dirs: np.ndarray, est_dirs: np.ndarray) -> np.ndarray:
     from scipy.optimize import linear_sum_assignment
 
@@ -77,7 +90,6 @@ def one_room(args):
     import torch
 
     torch.set_num_threads(1)
-    from scipy.optimize import linear_sum_assignment
     from scipy.signal import resample_poly
 
     from localization import doa, locate
@@ -107,15 +119,12 @@ def one_room(args):
     loc = locate(sim.captures, n_src, bounds=((0, 0, 0), room.dims))
     row["time_s"]["vrecho"] = (time.perf_counter() - t) / N_POSES
     row["doa"]["vrecho"] = [float(e) for k, c in enumerate(sim.captures) for e in _angles(true_dirs(c), loc.directions[k])]
-    D = np.linalg.norm(true[:, None] - loc.positions[None], axis=-1)
-    r, cidx = linear_sum_assignment(D)
-    row["position_m"] = D[r, cidx].tolist()
-    row["uncertainty_m"] = loc.uncertainty_m[cidx].tolist()
+    err, idx = _matched(true, loc.positions)
+    row["position_m"] = err.tolist()
+    row["uncertainty_m"] = np.where(idx >= 0, loc.uncertainty_m[np.maximum(idx, 0)], np.nan).tolist()
     free = locate(sim.captures, None, bounds=((0, 0, 0), room.dims))
     row["count_found"] = len(free.positions)
-    D = np.linalg.norm(true[:, None] - free.positions[None], axis=-1)
-    r, cidx = linear_sum_assignment(D)
-    row["position_free_m"] = D[r, cidx].tolist()
+    row["position_free_m"] = _matched(true, free.positions)[0].tolist()  # a source none is matched to: not found
     # EchoCNN-A's position head on microphone 0, one answer per capture
     clf = load_classifier()
     frames = np.array([resample_poly(c.audio[0, :16000], 441, 160)[:44100] for c in sim.captures])
@@ -190,8 +199,6 @@ def envelope_room(args):
     import torch
 
     torch.set_num_threads(1)
-    from scipy.optimize import linear_sum_assignment
-
     from localization import locate
     from localization.separate import informed, mix_back, si_sdr, track_weights
     from vrecho.errors import VrechoError
@@ -210,29 +217,16 @@ def envelope_room(args):
     t = time.perf_counter()
     loc = locate(sim.captures, n, bounds=walk.bounds)
     row["locate_s"] = time.perf_counter() - t
-    err = np.full(n, np.inf)
-    err_h = np.full(n, np.inf)
-    unc = np.full(n, np.nan)
-    strength = np.full(n, np.nan)
-    located = np.full((n, 3), np.nan)
-    if len(loc.positions):
-        D = np.linalg.norm(true[:, None] - loc.positions[None], axis=-1)
-        r, c = linear_sum_assignment(D)
-        err[r] = D[r, c]
-        err_h[r] = np.linalg.norm(true[r, :2] - loc.positions[c, :2], axis=1)
-        unc[r] = loc.uncertainty_m[c]
-        strength[r] = loc.strength[c]
-        located[r] = loc.positions[c]
+    err, idx = _matched(true, loc.positions)
+    r, c = np.flatnonzero(idx >= 0), idx[idx >= 0]
+    err_h, unc, strength, located = np.full(n, np.inf), np.full(n, np.nan), np.full(n, np.nan), np.full((n, 3), np.nan)
+    err_h[r] = np.linalg.norm(true[r, :2] - loc.positions[c, :2], axis=1)
+    unc[r], strength[r], located[r] = loc.uncertainty_m[c], loc.strength[c], loc.positions[c]
     row.update(position_m=err.tolist(), horizontal_m=err_h.tolist(), uncertainty_m=unc.tolist(), strength=strength.tolist(),
                agreement=loc.agreement)
     free = locate(sim.captures, None, bounds=walk.bounds).positions  # the count estimated, as place_sources does by default
     row["count_found"] = len(free)
-    err_free = np.full(n, np.inf)  # a source no estimate is matched to: not found
-    if len(free):
-        D = np.linalg.norm(true[:, None] - free[None], axis=-1)
-        r, c = linear_sum_assignment(D)
-        err_free[r] = D[r, c]
-    row["position_free_m"] = err_free.tolist()
+    row["position_free_m"] = _matched(true, free)[0].tolist()  # a source none is matched to: not found
     k = len(sim.captures) // 2
     cap, ref = sim.captures[k], sim.images[k, :, 0]
     base = [si_sdr(ref[j], cap.audio[0]) for j in range(n)]
