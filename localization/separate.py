@@ -29,11 +29,14 @@ Methods:
   microphone 0 as the remix says it may be off (:func:`track_weights`).
 
 Every method returns an array (k, samples), the capture's length, in the order of
-``positions`` for ``informed``.
+``positions`` for ``informed``; the same capture gives the same array on every call (the blind
+methods' random start is seeded: :data:`BLIND_SEED`).
 """
 
 from __future__ import annotations
 
+import contextlib
+import threading
 from dataclasses import dataclass
 from typing import Callable
 
@@ -139,9 +142,31 @@ def _blind(demix: Callable) -> Callable[..., np.ndarray]:
     gives the sources' spectra at microphone 0 from the capture's (frames, freq, mics) ``X``."""
     def run(capture: Capture, n_sources: int, positions, n_iter: int | None) -> np.ndarray:
         nfft = _blind_nfft(capture.fs)
-        Y = demix(capture, analysis(capture.audio, nfft), n_sources, n_iter or 50)
+        with _seeded_global_random():
+            Y = demix(capture, analysis(capture.audio, nfft), n_sources, n_iter or 50)
         return synthesis(Y, capture.audio.shape[1], nfft)
     return run
+
+
+BLIND_SEED = 0
+"""The seed of numpy's global generator while a blind method runs: pyroomacoustics' ILRMA and
+FastMNMF2 draw their starting factors from it (``np.random.rand``), so unseeded a capture
+separated differently on every call (and the benchmark's rows moved from run to run)."""
+
+_GLOBAL_RANDOM_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _seeded_global_random():
+    """numpy's global generator seeded with :data:`BLIND_SEED` inside, the caller's state put
+    back after (one blind separation at a time holds it: the state is process-wide)."""
+    with _GLOBAL_RANDOM_LOCK:
+        saved = np.random.get_state()
+        np.random.seed(BLIND_SEED)
+        try:
+            yield
+        finally:
+            np.random.set_state(saved)
 
 
 def _auxiva(capture: Capture, X: np.ndarray, k: int, n_iter: int) -> np.ndarray:
