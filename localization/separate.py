@@ -142,8 +142,9 @@ def _blind(demix: Callable) -> Callable[..., np.ndarray]:
     gives the sources' spectra at microphone 0 from the capture's (frames, freq, mics) ``X``."""
     def run(capture: Capture, n_sources: int, positions, n_iter: int | None) -> np.ndarray:
         nfft = _blind_nfft(capture.fs)
+        X = analysis(capture.audio, nfft)  # (outside the lock: only the demixing draws from the generator)
         with _seeded_global_random():
-            Y = demix(capture, analysis(capture.audio, nfft), n_sources, n_iter or 50)
+            Y = demix(capture, X, n_sources, n_iter or 50)
         return synthesis(Y, capture.audio.shape[1], nfft)
     return run
 
