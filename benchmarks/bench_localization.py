@@ -194,7 +194,7 @@ def envelope_room(args):
     the walk's middle capture: every track as separated, and as the guard gives it (microphone 0,
     or the track mixed with it: :func:`localization.separate.track_weights`; at the located positions
     with their uncertainty, as :func:`localization.place_sources` passes it), and as the guard would
-    give it without its spatial fit's bound, or without its uncertainty's."""
+    give it without the two mask networks' doubt (:data:`localization.separate.GUARD`'s ``doubt``), or without its uncertainty's bound."""
     condition, seed = args
     import torch
 
@@ -231,25 +231,25 @@ def envelope_room(args):
     cap, ref = sim.captures[k], sim.images[k, :, 0]
     base = [si_sdr(ref[j], cap.audio[0]) for j in range(n)]
     for name, pos in (("located", located), ("true", true)):
-        gains, out, kept, unsure, distinct, share, remixed, spatial, unspatial = ([float("nan")] * n for _ in range(9))
+        gains, out, kept, unsure, distinct, share, remixed, spatial, undoubted = ([float("nan")] * n for _ in range(9))
         have = np.all(np.isfinite(pos), axis=1)
         if have.any():
             u = unc[have] if name == "located" else None  # (the true positions are known)
             sep = informed(cap, pos[have], guard=False, uncertainty_m=u)  # every track; the guard's verdict and weight beside it
-            w_unspatial = track_weights(sep.distinct, sep.share, sep.remixed, None, u)  # the guard without the spatial fit's bound
-            w_unsure = track_weights(sep.distinct, sep.share, sep.remixed, sep.spatial)  # ... without the uncertainty's
+            w_undoubted = track_weights(sep.distinct, sep.share, sep.remixed, sep.spatial, u)  # the guard without the networks' doubt
+            w_unsure = track_weights(sep.distinct, sep.share, sep.remixed, sep.spatial, None, sep.doubt)  # ... without the uncertainty's
             for i, j in enumerate(np.flatnonzero(have)):
                 gains[j] = si_sdr(ref[j], sep.signals[i]) - base[j]
                 w = float(sep.weight[i])  # what the guard gives: the track mixed with microphone 0
                 out[j] = si_sdr(ref[j], mix_back(cap.audio[0], sep.signals[i], w)) - base[j] if w > 0 else 0.0
-                for other, ws in ((unspatial, w_unspatial), (unsure, w_unsure)):
+                for other, ws in ((undoubted, w_undoubted), (unsure, w_unsure)):
                     v = float(ws[i])
                     other[j] = si_sdr(ref[j], mix_back(cap.audio[0], sep.signals[i], v)) - base[j] if v > 0 else 0.0
                 kept[j], distinct[j], share[j] = w > 0, float(sep.distinct[i]), float(sep.share[i])
                 remixed[j], spatial[j] = float(sep.remixed[i]), float(sep.spatial[i])
         row[f"gain_{name}_db"], row[f"kept_{name}"], row[f"distinct_{name}"], row[f"share_{name}"] = gains, kept, distinct, share
         row[f"guarded_{name}_db"], row[f"guarded_unsure_{name}_db"], row[f"remixed_{name}"] = out, unsure, remixed
-        row[f"spatial_{name}"], row[f"guarded_unspatial_{name}_db"] = spatial, unspatial
+        row[f"spatial_{name}"], row[f"guarded_undoubted_{name}_db"] = spatial, undoubted
     row["time_s"] = time.perf_counter() - t0
     return row
 
@@ -270,21 +270,21 @@ def report_envelope(rows: list[dict]) -> str:
             return g, np.where(kept & np.isfinite(out), out, 0.0), kept
         raw, guarded, kept = gains("located")
         _, true_guarded, _ = gains("true")
-        unspatial, unsure = (np.array([x if np.isfinite(x) else 0.0 for r in sel for x in r.get(f"guarded_{key}_located_db", [np.nan] * len(r["sounds"]))])
-                             for key in ("unspatial", "unsure"))
+        undoubted, unsure = (np.array([x if np.isfinite(x) else 0.0 for r in sel for x in r.get(f"guarded_{key}_located_db", [np.nan] * len(r["sounds"]))])
+                             for key in ("undoubted", "unsure"))
         free = np.array([e for r in sel for e in r.get("position_free_m", [np.nan] * len(r["sounds"]))], float)
         return (f"{len(sel)} / {len(pos)} | {np.median(pos):.2f} | {np.median(hor):.2f} | {np.mean(pos < 0.5):.0%} | "
                 f"{np.mean(free < 0.5):.0%} | "
                 f"{np.mean(pos[ok] <= 2 * unc[ok]):.0%} | {np.mean([r['count_found'] == len(r['sounds']) for r in sel]):.0%} | "
                 f"{np.median(guarded):+.1f} / {np.mean(guarded >= 0):.0%} / {np.mean(guarded):+.2f} | {np.mean(kept):.0%} | "
-                f"{np.median(unspatial):+.1f} / {np.mean(unspatial >= 0):.0%} / {np.mean(unspatial):+.2f} | "
+                f"{np.median(undoubted):+.1f} / {np.mean(undoubted >= 0):.0%} / {np.mean(undoubted):+.2f} | "
                 f"{np.median(unsure):+.1f} / {np.mean(unsure >= 0):.0%} / {np.mean(unsure):+.2f} | "
                 f"{np.median(raw):+.1f} / {np.mean(raw >= 0):.0%} | {np.median(true_guarded):+.1f} / {np.mean(true_guarded >= 0):.0%} | "
                 f"{np.mean([r['locate_s'] / r['poses'] for r in sel]):.1f} s")
     lines = ["| condition | walks / sources | 3-D median m | horizontal median m | within 0.5 m | "
              "within 0.5 m, count estimated | error within 2 x uncertainty | "
              "count right | SI-SDR gain median / >= 0 dB / mean | tracks kept by the guard | "
-             "the guard without the spatial fit: median / >= 0 dB / mean | "
+             "the guard without the networks' doubt: median / >= 0 dB / mean | "
              "the guard without the uncertainty bound: median / >= 0 dB / mean | unguarded: median / >= 0 dB | "
              "true positions (guarded): median / >= 0 dB | locate per capture |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]

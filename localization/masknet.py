@@ -22,6 +22,27 @@ examples), each source's image scaled by up to 5 dB either way and the positions
 microphone 0's bin. The loss is the masked magnitude's error in dB of the source's own energy
 (with a floor 30 dB under the mixture), so a quiet source counts as much as a loud one. The
 shipped weights took 16 epochs of :mod:`vrecho.learn.masknet`, which trains it again.
+
+A second network of the same shape, ``assets/masknet_envelope.pt``, is the first fine-tuned
+across the envelope (:data:`vrecho.sim.arrays.TRAINING`: any array of 2 to 7 microphones, the
+head turning, 2 to 4 sources 0 to 20 dB apart, a quarter of the positions missed by 0.3 to 1.5 m;
+500 walks of seeds 20 000 +, 5 700 examples, 2 epochs from the first's weights at a peak rate of
+5e-4, 53 minutes on this project's 2-core machine)::
+
+    python3 -m vrecho.learn.masknet --walks envelope --rooms 500 --epochs 2 --lr 5e-4 \
+        --init localization/assets/masknet.pt --jobs 2 --data /tmp/masknet-env --out masknet_envelope.pt
+
+Its own shares separate worse (on the envelope's tuning walks, true positions, +1.5 dB SI-SDR in
+the median against the first's +3.1), but where the two networks disagree the first is unsure:
+:func:`shares_and_doubt` gives each source's disagreement, which informed separation's guard reads
+(:data:`localization.separate.GUARD`'s ``doubt``): two networks that learnt from different walks
+agree where the mixture is plain and part where the first guesses. Among the tracks the guard's
+other bounds keep, the doubt's Spearman correlation with the true gain is -0.47 (the envelope's
+tuning walks, seeds 380 000 +, located positions). Its bound was chosen there and on the headset's
+tuning rooms (seeds 7 700 +, two sources, RT60 0.4 s), 0.1 to 0.25 tried: at 0.2 the walks' tracks
+at or above the microphone 95.5 -> 97.5 % (mean SI-SDR gain +1.81 -> +1.58 dB; true positions
+95.5 -> 99.4 %), the headset's 85 -> 97.5 % (mean +2.37 -> +3.23 dB: it gives the microphone for
+three hums the other bounds kept at -9 to -17 dB); 0.16 gave the walks 98.1 % but the headset +2.55.
 """
 
 from __future__ import annotations
@@ -35,6 +56,7 @@ from .capture import FS  # noqa: F401 (the network's sample rate: captures at ot
 
 NFFT = 512
 WEIGHTS = Path(__file__).resolve().parent / "assets" / "masknet.pt"
+SECOND_WEIGHTS = WEIGHTS.with_name("masknet_envelope.pt")
 
 
 def features(X: np.ndarray, A: np.ndarray) -> np.ndarray:
@@ -145,9 +167,15 @@ def masknet_class():
     return MaskNet
 
 
-@functools.lru_cache(maxsize=1)
-def load_masknet():
-    """The shipped network (``assets/masknet.pt``, loaded once), in evaluation mode.
+@functools.lru_cache(maxsize=2)
+def load_masknet(path: Path | None = None):
+    """A shipped network (``assets/masknet.pt`` by default, or :data:`SECOND_WEIGHTS`; each loaded
+    once), in evaluation mode.
+
+    Parameters
+    ----------
+    path : path, optional
+        The weights (default :data:`WEIGHTS`).
 
     Returns
     -------
@@ -156,7 +184,7 @@ def load_masknet():
     """
     import torch  # heavy (1.7 s to import): only informed separation needs it
 
-    state = {k: v.float() for k, v in torch.load(WEIGHTS, map_location="cpu", weights_only=True).items()}  # shipped in half precision
+    state = {k: v.float() for k, v in torch.load(path or WEIGHTS, map_location="cpu", weights_only=True).items()}  # shipped in half precision
     model = masknet_class()(state["inp.0.weight"].shape[0])
     model.load_state_dict(state)
     return model.eval()
@@ -177,10 +205,38 @@ def source_masks(X: np.ndarray, A: np.ndarray) -> np.ndarray:
     numpy.ndarray [shape=(T, F, K), dtype=float64]
         Shares in [0, 1]; all 1 for a single source.
     """
+    return shares_and_doubt(X, A, doubt=False)[0]
+
+
+def shares_and_doubt(X: np.ndarray, A: np.ndarray, *, doubt: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+    """Each bin's share of each source (:func:`source_masks`), and how far the second network
+    (:data:`SECOND_WEIGHTS`) disagrees with it, source by source.
+
+    Parameters
+    ----------
+    X, A : numpy.ndarray
+        The capture's STFT and the sources' steering vectors, as :func:`source_masks` takes them.
+    doubt : bool
+        Run the second network too (default True); False gives None for the doubt.
+
+    Returns
+    -------
+    shares : numpy.ndarray [shape=(T, F, K), dtype=float64]
+        The first network's shares in [0, 1]; all 1 for a single source.
+    doubt : numpy.ndarray [shape=(K,)] or None
+        Per source, the two networks' shares' absolute difference weighted by microphone 0's
+        power, over the first's share of that power (0 where they agree; 0 for a single source).
+    """
     import torch  # heavy (1.7 s to import): only informed separation needs it
 
     if A.shape[-1] == 1:
-        return np.ones(X.shape[:2] + (1,))
+        return np.ones(X.shape[:2] + (1,)), (np.zeros(1) if doubt else None)
     with torch.no_grad():
-        masks = load_masknet()(torch.as_tensor(features(X, A))).numpy()
-    return masks.transpose(2, 1, 0).astype(np.float64)
+        f = torch.as_tensor(features(X, A))
+        masks = load_masknet()(f).numpy()
+        second = load_masknet(SECOND_WEIGHTS)(f).numpy() if doubt else None
+    out = None
+    if doubt:
+        power = (np.abs(X[..., 0]) ** 2).T  # (F, T)
+        out = np.einsum("ft,kft->k", power, np.abs(masks - second)) / (np.einsum("ft,kft->k", power, masks) + 1e-30)
+    return masks.transpose(2, 1, 0).astype(np.float64), out

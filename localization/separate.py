@@ -25,8 +25,9 @@ Methods:
   separation cannot take back out of a remix of its own tracks (where it guessed), or whose
   sound, as its shares gather it, points at another source's position rather than its own
   (:func:`spatial_fit`), or, among three or more sources whose positions' uncertainty is given,
-  that was placed too unsurely to steer by; a track it keeps comes mixed with as much of
-  microphone 0 as the remix says it may be off (:func:`track_weights`).
+  that was placed too unsurely to steer by, or whose shares a second network (the first fine-tuned
+  across the envelope) gives otherwise; a kept track comes mixed with as much of microphone 0 as
+  the remix says it may be off (:func:`track_weights`).
 
 Every method returns an array (k, samples), the capture's length, in the order of
 ``positions`` for ``informed``; the same capture gives the same array on every call (the blind
@@ -326,9 +327,8 @@ class Informed:
         Whether the source's own track was kept: False where the guard judged that it could come
         out worse than the microphone (:data:`GUARD`).
     weight : numpy.ndarray [shape=(K,)]
-        The track's weight in ``signals``, the rest microphone 0's (:func:`track_weights`): 0
-        where not separated; with ``guard=False`` what the guard would have given, ``signals``
-        holding the tracks themselves.
+        The track's weight in ``signals``, the rest microphone 0's (:func:`track_weights`): 0 where
+        not separated; with ``guard=False`` what the guard would give, ``signals`` the tracks.
     distinct : numpy.ndarray [shape=(K,)]
         The share of microphone 0's power in bins where the array tells the source's direction
         from every other's (steering vectors' coherence under :data:`DISTINCT_COHERENCE`).
@@ -338,9 +338,10 @@ class Informed:
         How much of the source's track the separation takes back out of a mixture of its own
         tracks: the SI-SDR gain in dB over that remix's microphone 0 of separating it again, at
         the same positions (infinite for a lone source).
-    spatial : numpy.ndarray [shape=(K,)]
+    spatial, doubt : numpy.ndarray [shape=(K,)]
         How much better the track's sound points at its own position than at another source's
-        (:func:`spatial_fit`; infinite for a lone source).
+        (:func:`spatial_fit`; infinite for a lone source), and the two mask networks' disagreement
+        (:func:`localization.masknet.shares_and_doubt`; 0 for a lone source).
     """
 
     signals: np.ndarray
@@ -350,6 +351,7 @@ class Informed:
     share: np.ndarray
     remixed: np.ndarray
     spatial: np.ndarray
+    doubt: np.ndarray
 
 
 DISTINCT_COHERENCE = 0.8
@@ -396,14 +398,14 @@ def informed(capture: Capture, positions: np.ndarray, *, guard: bool = True, unc
     unc = _check_uncertainty(uncertainty_m, len(positions))
     if len(positions) == 1:  # nothing to separate it from: its track is microphone 0
         return Informed(capture.audio[:1].copy(), np.ones(1, bool), np.ones(1), np.ones(1), np.ones(1), np.full(1, np.inf),
-                        np.full(1, np.inf))
+                        np.full(1, np.inf), np.zeros(1))
     fs, nfft = masknet.FS, masknet.NFFT
     n = capture.audio.shape[1]
     audio = capture.audio_at(fs)
     X = analysis(audio, nfft)
     freqs = np.fft.rfftfreq(nfft, 1 / fs)
     A = steering(capture, positions, freqs)
-    out, share, remix, covs = _images(X, A)
+    out, share, remix, covs, doubt = _images(X, A, doubt=True)
     # The remix: the tracks' own images summed, separated again; how much of each track comes back
     # (its SI-SDR gain over the remix's microphone 0) says whether the network and the filter knew
     # the source or guessed (Informed.remixed).
@@ -429,19 +431,19 @@ def informed(capture: Capture, positions: np.ndarray, *, guard: bool = True, unc
         rho = np.einsum("tf,tfk->k", power[:, top], share[:, top]) / (power[:, top].sum() + 1e-30)
         y = y + rho[:, None] * high[None]
     spatial = spatial_fit(covs, A, freqs)
-    weight = track_weights(distinct, mass, remixed, spatial, unc)
+    weight = track_weights(distinct, mass, remixed, spatial, unc, doubt)
     if guard:
         y = mix_back(capture.audio[0], y, weight)
-    return Informed(y, weight > 0 if guard else np.ones(k_src, bool), weight, distinct, mass, remixed, spatial)
+    return Informed(y, weight > 0 if guard else np.ones(k_src, bool), weight, distinct, mass, remixed, spatial, doubt)
 
 
-def _images(X: np.ndarray, A: np.ndarray):
+def _images(X: np.ndarray, A: np.ndarray, doubt: bool = False):
     """The multichannel Wiener filter on the network's shares (the module's docstring).
 
-    Returns each source's spectrum at microphone 0 (T, F, K), the shares (T, F, K), the sum
-    of the sources' images at every microphone (T, F, M) (the remix), and the sources' spatial
-    covariances (K, F, M, M) (:func:`covariances`)."""
-    share = masknet.source_masks(X, A)
+    Returns each source's spectrum at microphone 0 (T, F, K), the shares (T, F, K), the sum of the
+    sources' images at every microphone (T, F, M) (the remix), their spatial covariances (K, F, M,
+    M) (:func:`covariances`), and the networks' doubt (K,) (None unless ``doubt``)."""
+    share, disagree = masknet.shares_and_doubt(X, A, doubt=doubt)
     n_frames, _, m = X.shape
     Rx = np.einsum("tfm,tfn->fmn", X, np.conj(X)) / n_frames
     iRx = np.linalg.inv(Rx + 1e-9 * np.trace(Rx, axis1=-2, axis2=-1).real.mean() * np.eye(m))
@@ -452,7 +454,7 @@ def _images(X: np.ndarray, A: np.ndarray):
         img = np.einsum("fin,tfn->tfi", covs[k] @ iRx, X) * np.sqrt(share[..., k])[..., None]
         out[..., k] = img[..., 0]
         remix += img
-    return out, share, remix, covs
+    return out, share, remix, covs, disagree
 
 
 def covariances(X: np.ndarray, share: np.ndarray) -> np.ndarray:
@@ -536,7 +538,7 @@ def si_sdr(reference: np.ndarray, estimate: np.ndarray) -> float:
 
 
 GUARD = {"distinct": 0.05, "share": 0.1, "remixed_db": 8.0, "spatial": 0.0, "uncertainty_m": 1.0, "uncertainty_sources": 3,
-         "mix_back_db": 6.0, "mix_back_width_db": 5.0}
+         "doubt": 0.2, "mix_back_db": 6.0, "mix_back_width_db": 5.0}
 """Informed separation keeps a source's track only where the array tells its direction from
 the others' over at least ``distinct`` of microphone 0's power, the network gives it at least
 ``share`` of that power, and separating a remix of its own tracks gives the track back at least
@@ -575,11 +577,13 @@ held-out conditions at seeds 190 000 + (36 walks, 85 tracks): 91.8 -> 97.6 %, +1
 did no better. The benchmark on sets never run before: seeds 250 000 +, held-out conditions
 94 -> 99 % (+1.46 -> +1.27 dB), tuning conditions 89 -> 97 % (+0.63 -> +1.29 dB); seeds
 270 000 +, 97 -> 99 % (+3.22 -> +2.42 dB) and 88 -> 91 % (+1.14 -> +0.59 dB).
+``doubt``: a source whose shares the second mask network gives otherwise by this much of its power
+or more (:attr:`Informed.doubt`) gets microphone 0 (chosen as :mod:`localization.masknet` says).
 ``mix_back_db`` and ``mix_back_width_db``: :func:`track_weights`."""
 
 
 def track_weights(distinct: np.ndarray, share: np.ndarray, remixed: np.ndarray, spatial=None,
-                  uncertainty_m=None) -> np.ndarray:
+                  uncertainty_m=None, doubt=None) -> np.ndarray:
     """How much of each source's track :func:`informed` gives, the rest microphone 0's.
 
     A kept track and microphone 0 are two estimates of the source: where the track is barely
@@ -599,8 +603,8 @@ def track_weights(distinct: np.ndarray, share: np.ndarray, remixed: np.ndarray, 
     ----------
     distinct, share, remixed : numpy.ndarray [shape=(K,)]
         :attr:`Informed.distinct`, :attr:`Informed.share` and :attr:`Informed.remixed`.
-    spatial : numpy.ndarray [shape=(K,)], optional
-        :attr:`Informed.spatial` (default: not read).
+    spatial, doubt : numpy.ndarray [shape=(K,)], optional
+        :attr:`Informed.spatial` and :attr:`Informed.doubt` (default: not read).
     uncertainty_m : numpy.ndarray [shape=(K,)], optional
         Each position's standard error in metres (default: not read; an infinite one, unknown,
         is not read either; nor is any under :data:`GUARD`'s ``uncertainty_sources`` sources).
@@ -612,8 +616,8 @@ def track_weights(distinct: np.ndarray, share: np.ndarray, remixed: np.ndarray, 
         over ``distinct`` of the power, given under ``share`` of it, its remix under
         ``remixed_db``, or, where ``spatial`` is given, its track pointing at another source:
         under ``spatial``; or, where ``uncertainty_m`` is given and there are at least
-        ``uncertainty_sources`` sources, its position less sure than ``uncertainty_m``), 1 for
-        a lone source.
+        ``uncertainty_sources`` sources, its position less sure than ``uncertainty_m``; or, where
+        ``doubt`` is given, the two mask networks parting by ``doubt`` or more), 1 for a lone source.
     """
     remixed = np.asarray(remixed, float)
     with np.errstate(over="ignore"):
@@ -621,6 +625,8 @@ def track_weights(distinct: np.ndarray, share: np.ndarray, remixed: np.ndarray, 
     keep = (np.asarray(distinct) >= GUARD["distinct"]) & (np.asarray(share) >= GUARD["share"]) & (remixed >= GUARD["remixed_db"])
     if spatial is not None:
         keep &= np.asarray(spatial, float) >= GUARD["spatial"]
+    if doubt is not None:
+        keep &= np.asarray(doubt, float) < GUARD["doubt"]
     if uncertainty_m is not None and len(remixed) >= GUARD["uncertainty_sources"]:
         unc = np.asarray(uncertainty_m, float)
         keep &= ~(np.isfinite(unc) & (unc > GUARD["uncertainty_m"]))

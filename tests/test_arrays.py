@@ -216,6 +216,8 @@ def test_a_kept_track_weighs_against_the_microphone_as_its_remix_says():
     unsure = np.array([0.0, GUARD["uncertainty_m"], GUARD["uncertainty_m"] + 0.01, np.inf])  # (inf: unknown, not read)
     assert (track_weights(ok, ok, np.full(4, 20.0), None, unsure) > 0).tolist() == [True, True, False, True]
     assert np.all(track_weights(ok[:2], ok[:2], np.full(2, 20.0), None, unsure[1:3]) > 0)  # two sources: not read
+    doubt = np.array([0.0, GUARD["doubt"] - 0.01, GUARD["doubt"], 5.0])  # the two mask networks parting: the microphone
+    assert (track_weights(ok, ok, np.full(4, 20.0), None, None, doubt) > 0).tolist() == [True, True, False, False]
     mic, tracks = np.arange(3.0), np.array([[5.0, 5, 5], [1, 1, 1], [2, 4, 6]])
     mixed = mix_back(mic, tracks, np.array([0.0, 1.0, 0.5]))  # what informed gives: each track with the microphone
     assert np.array_equal(mixed, [mic, tracks[1], [1, 2.5, 4]]) and np.array_equal(mix_back(mic, tracks[2], 0.5), mixed[2])

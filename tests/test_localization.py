@@ -153,7 +153,7 @@ def test_mask_network(two_sources, tmp_path):
     owns every bin; a tiny training run writes weights the shipped network's shape."""
     import torch
 
-    from localization.masknet import FS, NFFT, WEIGHTS, source_masks
+    from localization.masknet import FS, NFFT, WEIGHTS, shares_and_doubt, source_masks
     from vrecho.learn.masknet import train
     from localization.separate import analysis, steering
 
@@ -168,6 +168,10 @@ def test_mask_network(two_sources, tmp_path):
     quieter = power[..., 1] > 10 * power[..., 0]
     assert share[..., 0][louder].mean() > share[..., 0][quieter].mean() + 0.3
     assert np.all(source_masks(X, A[..., :1]) == 1)
+    # The second network (fine-tuned across the envelope) near the first on a plain mixture.
+    again, doubt = shares_and_doubt(X, A)
+    assert np.array_equal(again, share) and doubt.shape == (2,) and np.all((doubt >= 0) & (doubt < 1))
+    assert shares_and_doubt(X, A, doubt=False)[1] is None and shares_and_doubt(X, A[..., :1])[1].tolist() == [0.0]
     out = tmp_path / "m.pt"
     history = train(out, rooms=1, epochs=1, jobs=1, progress=False)
     assert len(history) == 1 and np.isfinite(history[0])
