@@ -27,7 +27,7 @@ A second network of the same shape, ``assets/masknet_envelope.pt``, is the first
 across the envelope (:data:`vrecho.sim.arrays.TRAINING`: any array of 2 to 7 microphones, the
 head turning, 2 to 4 sources 0 to 20 dB apart, a quarter of the positions missed by 0.3 to 1.5 m;
 500 walks of seeds 20 000 +, 5 700 examples, 2 epochs from the first's weights at a peak rate of
-5e-4, 53 minutes on this project's 2-core machine)::
+5e-4: 56 minutes in all on this project's 2-core machine)::
 
     python3 -m vrecho.learn.masknet --walks envelope --rooms 500 --epochs 2 --lr 5e-4 \
         --init localization/assets/masknet.pt --jobs 2 --data /tmp/masknet-env --out masknet_envelope.pt
@@ -234,9 +234,9 @@ def shares_and_doubt(X: np.ndarray, A: np.ndarray, *, doubt: bool = True) -> tup
     with torch.no_grad():
         f = torch.as_tensor(features(X, A))
         masks = load_masknet()(f).numpy()
-        second = load_masknet(SECOND_WEIGHTS)(f).numpy() if doubt else None
-    out = None
-    if doubt:
-        power = (np.abs(X[..., 0]) ** 2).T  # (F, T)
-        out = np.einsum("ft,kft->k", power, np.abs(masks - second)) / (np.einsum("ft,kft->k", power, masks) + 1e-30)
-    return masks.transpose(2, 1, 0).astype(np.float64), out
+        if not doubt:
+            return masks.transpose(2, 1, 0).astype(np.float64), None
+        second = load_masknet(SECOND_WEIGHTS)(f).numpy()
+    power = (np.abs(X[..., 0]) ** 2).T  # (F, T)
+    parted = np.einsum("ft,kft->k", power, np.abs(masks - second)) / (np.einsum("ft,kft->k", power, masks) + 1e-30)
+    return masks.transpose(2, 1, 0).astype(np.float64), parted
