@@ -36,7 +36,7 @@ def compile_kernels() -> None:
     pair(np.ones(2), np.ones(2), np.ones((1, 8)), 1.0, 1.0, 0.01, 3.0)
     echo_path(1.0, 0.07, 0.0)  # (scalars, as the monitor calls it too)
     lines(np.ones(1), np.ones(1), np.ones(1), 0.5, -0.1, 0.1, 0.006)
-    theil_sen(np.arange(3.0), np.ones(3))
+    theil_sen(np.arange(3.0), np.ones(3), 0.0)
     _COMPILED = True
 
 
@@ -303,31 +303,64 @@ def _fit(us, ys, keep):  # pragma: no cover (compiled)
 
 
 @njit(cache=True, nogil=True)
-def theil_sen(t, d):  # pragma: no cover (compiled)
-    """How far the points (t, d) stray from the line of their median pairwise slope (Theil-Sen).
+def theil_sen(t, d, accel=0.0):  # pragma: no cover (compiled)
+    """How far the points (t, d) stray from the line of their median pairwise slope (Theil-Sen),
+    or, with ``accel``, from the curve of a steady approach speeding up by at most that much.
+
+    A wearer who sets off near a surface speeds up from standing to 2 m/s within half a second or
+    so: over eight pulses the echoes then bend up to a centimetre off any straight line, while
+    about the curve of that acceleration (d - a (t - mean t)^2 / 2 straight, a < 0: closing
+    faster) they scatter a millimetre. With ``accel``, where the line leaves a millimetre or more,
+    the accelerations 0 to -``accel`` in steps of :data:`ACCEL_STEP` are tried, and the curve that
+    leaves the least is kept where it leaves under :data:`CURVE_M` (on seed 53000's walks, a
+    curve either way and at any fit let two lines of stray peaks alert: another headset's pings
+    and all at once's).
 
     Parameters
     ----------
     t, d : numpy.ndarray [shape=(n,)]
         Times in seconds and distances in metres, n >= 2.
+    accel : float
+        The largest acceleration to allow for, in m/s^2 (0: a straight line).
 
     Returns
     -------
     median, newest, slope : float
-        The median absolute residual about that line (its offset the residuals' median), in
-        metres, the last point's own, and the line's slope in m/s.
+        The median absolute residual about that line or curve (its offset the residuals'
+        median), in metres, the last point's own, and the line's slope in m/s (at the mean time).
     """
     n = len(t)
     slopes = np.empty(n * (n - 1) // 2)
-    k = 0
-    for i in range(n):
-        for j in range(i + 1, n):
-            slopes[k] = (d[j] - d[i]) / max(t[j] - t[i], 1e-6)
-            k += 1
-    slope = np.median(slopes)
-    r = d - slope * t
-    r = np.abs(r - np.median(r))
-    return np.median(r), r[-1], slope
+    mean_t = np.mean(t)
+    best_median, best_newest, best_slope = np.inf, 0.0, 0.0
+    steps = int(accel / ACCEL_STEP + 1e-9)
+    for s in range(steps + 1):
+        a = -ACCEL_STEP * s  # (closing faster: the wearer speeding up toward the surface)
+        y = d - 0.5 * a * (t - mean_t) ** 2
+        k = 0
+        for i in range(n):
+            for j in range(i + 1, n):
+                slopes[k] = (y[j] - y[i]) / max(t[j] - t[i], 1e-6)
+                k += 1
+        slope = np.median(slopes)
+        r = y - slope * t
+        r = np.abs(r - np.median(r))
+        median = np.median(r)
+        if median < best_median and (s == 0 or median < CURVE_M):  # (a curve only where it fits as a surface's echoes do)
+            best_median, best_newest, best_slope = median, r[-1], slope
+        if s == 0 and median < 0.001:  # (on a line within a millimetre: no curve asked)
+            break
+    return best_median, best_newest, best_slope
+
+
+CURVE_M = 0.0015
+"""The most a curve :func:`theil_sen` tries may leave (its median absolute residual, metres) and
+count: a surface's echoes lie within a millimetre of their curve; a line of stray peaks that one
+more freedom bends toward them, at a few millimetres, is left to the straight line's reading."""
+
+ACCEL_STEP = 0.5
+"""The accelerations :func:`theil_sen` tries are this far apart, m/s^2 (over 8 pulses of some 0.3 s,
+a step's curve parts from its neighbour's by under 3 mm at the ends)."""
 
 
 @njit(cache=True, nogil=True)

@@ -373,11 +373,14 @@ class Track:
                         np.asarray(offsets, float), float(span_s))
 
     def straight(self, n: int) -> tuple[float, float]:
-        """How far the last ``n`` echoes stray from a straight line in time: the median absolute
-        residual about the line of their median pairwise slope (Theil-Sen), in metres. A
-        surface's echoes, walked toward at a steady pace: a millimetre or so, whatever one pulse
-        timed off after the round trip stepped; a still surface's track that took a line of
-        stray peaks: centimetres, where it bends. And the newest echo's own residual, which the
+        """How far the last ``n`` echoes stray from a straight line in time, or from the curve of an
+        approach speeding up by at most :data:`_ACCEL` where that fits within 1.5 mm (a wearer
+        setting off: :func:`~.kernels.theil_sen`): the median absolute residual about the line of their median
+        pairwise slope (Theil-Sen), in metres. A surface's echoes, walked toward at a steady pace
+        or speeding up: a millimetre or so, whatever one pulse timed off after the round trip
+        stepped (a wearer speeding up from standing to 2 m/s 1.4 m from a mirror bent the line by
+        8 to 10 mm, and cautioned at 0.38 m: seed 53000's room 11, every row); a still surface's
+        track that took a line of stray peaks: centimetres, where it bends. And the newest echo's own residual, which the
         median overlooks: a track that has just taken a stray peak 10 to 30 cm nearer than its
         surface (another headset's ping) lies on its line but for that echo.
 
@@ -390,7 +393,7 @@ class Track:
         -------
         median, newest : float
         """
-        median, newest, _ = self._theil_sen(n)
+        median, newest, _ = self._theil_sen(n, _ACCEL)
         return float(median), float(newest)
 
     def steady_speed(self, n: int = 16) -> float:
@@ -411,11 +414,11 @@ class Track:
         """
         return float(self._theil_sen(n)[2])
 
-    def _theil_sen(self, n: int) -> tuple:
+    def _theil_sen(self, n: int, accel: float = 0.0) -> tuple:
         """:func:`~.kernels.theil_sen` of the last ``n`` echoes (all there are if fewer)."""
         k = min(n, len(self.times))
         return theil_sen(np.fromiter(self.times, float, len(self.times))[-k:],
-                         np.fromiter(self.dists, float, len(self.dists))[-k:])
+                         np.fromiter(self.dists, float, len(self.dists))[-k:], float(accel))
 
     def ahead_with(self, t: float, d: float, miss_m: float, still: list[float]) -> bool:
         """Whether the surface is in the way with one more echo, the history left as it is.
