@@ -231,7 +231,9 @@ def _plane_envelopes(h: np.ndarray, tolerance_m: float):
     # one length for every frame, the farthest window's and its ring's, the microphone as far as
     # the direct sound's search allows (a frame's envelope must not depend on its batch)
     far = 2 * (MAX_SURFACE_M + tolerance_m) + c * DIRECT_S
-    n = min(int(np.ceil(far / c * FS)) + gap + ring + 8, FS)
+    # at a length its FFTs are fast for: 2 880 samples, not 2 823 (2 823 = 3 x 941), took a band's
+    # Hilbert pair 0.20 -> 0.04 ms, the plane's echo of one frame 1.50 -> 1.12 ms (2026-12-07)
+    n = min(scipy.fft.next_fast_len(int(np.ceil(far / c * FS)) + gap + ring + 8, real=True), FS)
     half = PLANE_KERNEL_HALF
     m = scipy.fft.next_fast_len(n + 4 * half, real=True)
     # the response's last samples, then its first: a whole second's band response is circular
@@ -245,8 +247,8 @@ def _plane_envelopes(h: np.ndarray, tolerance_m: float):
 PLANE_KERNEL_HALF = 1024
 """Samples on either side of its centre that a band of :data:`PLANE_BANDS_HZ` is filtered with: the
 response of :func:`~vrecho.features.band_weights` over a 1 s frame's bins falls as 1 / t^3, every
-tap past these under 4.4e-7 of the peak (-127 dB), so a band's response over the first 2 760
-samples takes FFTs of 6 860 points, not of the whole second (the plane's envelopes 0.5 to 0.7 -> 0.2 ms a
+tap past these under 4.4e-7 of the peak (-127 dB), so a band's response over the first 2 880
+samples takes FFTs of 7 200 points, not of the whole second (the plane's envelopes 0.5 to 0.7 -> 0.2 ms a
 frame)."""
 
 
