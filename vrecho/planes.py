@@ -231,7 +231,7 @@ def _plane_envelopes(h: np.ndarray, tolerance_m: float):
     # one length for every frame, the farthest window's and its ring's, the microphone as far as
     # the direct sound's search allows (a frame's envelope must not depend on its batch)
     far = 2 * (MAX_SURFACE_M + tolerance_m) + c * DIRECT_S
-    # at a length its FFTs are fast for: 2 880 samples, not 2 823 (2 823 = 3 x 941), took a band's
+    # at a length its FFTs are fast for (the default 5 cm tolerance: 2 880 samples, not 2 823 = 3 x 941) took a band's
     # Hilbert pair 0.20 -> 0.04 ms, the plane's echo of one frame 1.50 -> 1.12 ms (2026-12-07)
     n = min(scipy.fft.next_fast_len(int(np.ceil(far / c * FS)) + gap + ring + 8, real=True), FS)
     half = PLANE_KERNEL_HALF
