@@ -346,7 +346,8 @@ def theil_sen(t, d, accel=0.0):  # pragma: no cover (compiled)
         r = y - slope * t
         r = np.abs(r - np.median(r))
         median = np.median(r)
-        if median < best_median and (s == 0 or median < CURVE_M):  # (a curve only where it fits as a surface's echoes do)
+        # (a curve only where it fits as a surface's echoes do)
+        if median < best_median and (s == 0 or median < CURVE_M):
             best_median, best_newest, best_slope = median, r[-1], slope
         if s == 0 and median < 0.001:  # (on a line within a millimetre: no curve asked)
             break

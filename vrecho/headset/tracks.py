@@ -374,15 +374,16 @@ class Track:
 
     def straight(self, n: int) -> tuple[float, float]:
         """How far the last ``n`` echoes stray from a straight line in time, or from the curve of an
-        approach speeding up by at most :data:`_ACCEL` where that fits within 1.5 mm (a wearer
-        setting off: :func:`~.kernels.theil_sen`): the median absolute residual about the line of their median
-        pairwise slope (Theil-Sen), in metres. A surface's echoes, walked toward at a steady pace
-        or speeding up: a millimetre or so, whatever one pulse timed off after the round trip
-        stepped (a wearer speeding up from standing to 2 m/s 1.4 m from a mirror bent the line by
-        8 to 10 mm, and cautioned at 0.38 m: seed 53000's room 11, every row); a still surface's
-        track that took a line of stray peaks: centimetres, where it bends. And the newest echo's own residual, which the
-        median overlooks: a track that has just taken a stray peak 10 to 30 cm nearer than its
-        surface (another headset's ping) lies on its line but for that echo.
+        approach speeding up by at most :data:`_ACCEL` where that fits within
+        :data:`~.kernels.CURVE_M` (a wearer setting off: :func:`~.kernels.theil_sen`): the median
+        absolute residual about the line of their median pairwise slope (Theil-Sen), in metres. A
+        surface's echoes, walked toward at a steady pace or speeding up: a millimetre or so,
+        whatever one pulse timed off after the round trip stepped (a wearer speeding up from
+        standing to 2 m/s 1.4 m from a mirror bent the line by 8 to 10 mm, and was cautioned only
+        at 0.38 m before the curve: seed 53000's room 11, every row); a still surface's track that
+        took a line of stray peaks: centimetres, where it bends. And the newest echo's own
+        residual, which the median overlooks: a track that has just taken a stray peak 10 to 30 cm
+        nearer than its surface (another headset's ping) lies on its line but for that echo.
 
         Parameters
         ----------
